@@ -1,0 +1,56 @@
+"""The one small interface between a simulator and a controller.
+
+A simulator calls `reset()` at the start of an episode and `solve(state, reference, obstacles, t)`
+once per control step; it applies `ControlResult.control` until the next step. Nothing else of
+the controller is needed by the simulator, and `controllers` never imports the simulator.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Literal, Protocol
+
+import numpy as np
+
+from controllers.obstacles import Obstacle
+from controllers.references import Reference
+
+FallbackKind = Literal["none", "previous-plan", "brake"]
+
+
+@dataclass
+class ControlResult:
+    """One control step's decision and everything worth logging about it."""
+
+    control: np.ndarray  # [v (m/s), omega (rad/s)] to apply now
+    predicted_states: np.ndarray  # (N+1, 3) planned [x, y, theta]
+    predicted_controls: np.ndarray  # (N, 2) planned [v, omega]
+    clf_slack: np.ndarray  # s_v (N,)
+    decay_slack: np.ndarray  # s_h (N,); ones where s_h is not a variable
+    predicted_barrier: np.ndarray  # (obstacles considered, N+1) B = d^2 - (r_rb + r_ob)^2 (m^2)
+    safety_active: int  # obstacle constraints at their bound (residual <= ACTIVE_TOL)
+    status: str  # IPOPT return status, or the reason of a fallback
+    success: bool  # IPOPT converged to a (possibly acceptable) optimum
+    fallback: FallbackKind  # what was applied instead of a solved plan
+    iterations: int  # IPOPT iterations (-1 when no solve ran)
+    solve_time_s: float  # wall time of the whole `solve` call (s)
+    obstacles_considered: int  # obstacles in the NLP this step (<= obstacle slots)
+    obstacles_ignored: int  # obstacles dropped because more than the slots were given
+
+    @property
+    def is_fallback(self) -> bool:
+        return self.fallback != "none"
+
+
+class Controller(Protocol):
+    """What a simulator needs from a controller."""
+
+    def reset(self) -> None:
+        """Forget the previous plan (new episode)."""
+
+    def solve(
+        self, state: np.ndarray, reference: Reference, obstacles: Sequence[Obstacle], t: float
+    ) -> ControlResult:
+        """Control for measured state [x, y, theta] (m, m, rad) at time t (s); never raises for a
+        solver failure."""

@@ -1,0 +1,171 @@
+"""The NMPC-CLF controller with a BT, CBF or Relax-CBF obstacle constraint (paper Sec. III).
+
+Per step: sample the reference along the horizon, predict the obstacles, warm-start IPOPT from
+the previous plan shifted by one step (s_h guess 1), solve, apply the first control.
+
+Fallback when IPOPT fails (infeasible, iteration or time limit, non-finite numbers, exception):
+the next control of the last solved plan, if that plan's remaining states are still collision-free
+against the obstacles as now predicted; otherwise a braking command v = 0, omega = 0. The result
+is marked as a fallback and the loop goes on; `solve` never raises for a solver failure.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Sequence
+from typing import Literal
+
+import numpy as np
+
+from controllers.backends import BACKENDS, RawSolution, sx_problem
+from controllers.config import NMPCConfig
+from controllers.interface import ControlResult, FallbackKind
+from controllers.model import wrap_angle
+from controllers.obstacles import Obstacle, predict_obstacles
+from controllers.ocp import OCPParameters, Plan
+from controllers.references import Reference
+
+#: A safety constraint whose residual is at most this (m or m^2) counts as active.
+ACTIVE_TOL = 1e-4
+BRAKE = np.zeros(2)
+
+
+class NMPCController:
+    """NMPC with CLF and obstacle constraints; one NLP built per configuration."""
+
+    def __init__(self, config: NMPCConfig, backend: Literal["nlpsol", "opti"] = "nlpsol") -> None:
+        self.config = config
+        self._backend = BACKENDS[backend](config)
+        self._problem = sx_problem(config)
+        self._layout = self._problem.layout
+        self._plan: Plan | None = None  # last successfully solved plan
+        self._plan_age = 0  # control steps since that plan was solved
+
+    @property
+    def backend_name(self) -> str:
+        return self._backend.name
+
+    def reset(self) -> None:
+        self._plan, self._plan_age = None, 0
+        self._backend.reset()
+
+    # -- per-step preparation -------------------------------------------------------------
+    def _parameters(
+        self, state: np.ndarray, reference: Reference, obstacles: Sequence[Obstacle], t: float
+    ) -> OCPParameters:
+        cfg = self.config
+        ref_states, ref_controls = reference.sample(t, cfg.tau_s, cfg.horizon)
+        ref_states = ref_states.copy()
+        # Put the reference headings within pi of the measured heading (2 pi k shift), so the
+        # wrapped heading error in the OCP starts far from its +-pi jump.
+        ref_states[:, 2] += (state[2] + wrap_angle(ref_states[0, 2] - state[2])) - ref_states[0, 2]
+        centres, radii = predict_obstacles(
+            obstacles,
+            state[:2],
+            cfg.obstacle_slots,
+            cfg.tau_s,
+            cfg.horizon,
+            cfg.obstacle_prediction,
+        )
+        return OCPParameters(state.copy(), ref_states, ref_controls, centres, radii)
+
+    def _initial_guess(self, state: np.ndarray, params: OCPParameters) -> Plan:
+        n = self.config.horizon
+        if self._plan is None:
+            guess = Plan(np.tile(state, (n + 1, 1)), params.ref_controls.copy(), np.zeros(n), np.ones(n))
+        else:
+            guess = self._plan.shifted(self._plan_age + 1)
+            guess.states[:, 2] += 2 * np.pi * np.round((state[2] - guess.states[0, 2]) / (2 * np.pi))
+        guess.states[0] = state
+        guess.controls[:, 0] = np.clip(guess.controls[:, 0], self.config.v_min_mps, self.config.v_max_mps)
+        w = self.config.omega_max_radps
+        guess.controls[:, 1] = np.clip(guess.controls[:, 1], -w, w)
+        return guess
+
+    # -- fallback ---------------------------------------------------------------------------
+    def _previous_plan_is_safe(self, params: OCPParameters, n_real: int) -> bool:
+        """Whether the last plan's remaining states keep B >= 0 against the obstacles as now
+        predicted (the robot circle model)."""
+        if self._plan is None or self._plan_age + 1 >= self.config.horizon:
+            return False
+        remaining = self._plan.states[self._plan_age + 1 :, :2]
+        steps = remaining.shape[0]
+        for slot in range(n_real):
+            centres = params.obstacle_centres[slot, :steps]
+            r_sum = self.config.robot_radius_m + params.obstacle_radii[slot]
+            if np.any(np.sum((remaining - centres) ** 2, axis=1) < r_sum**2):
+                return False
+        return True
+
+    def _fallback(self, params: OCPParameters, n_real: int) -> tuple[np.ndarray, FallbackKind]:
+        if self._previous_plan_is_safe(params, n_real):
+            self._plan_age += 1
+            return self._plan.controls[self._plan_age].copy(), "previous-plan"
+        return BRAKE.copy(), "brake"
+
+    # -- the control step ------------------------------------------------------------------
+    def solve(
+        self, state: np.ndarray, reference: Reference, obstacles: Sequence[Obstacle], t: float
+    ) -> ControlResult:
+        start = time.perf_counter()
+        state = np.asarray(state, dtype=float).reshape(-1)
+        n_real = min(len(obstacles), self.config.obstacle_slots)
+        ignored = len(obstacles) - n_real
+        if state.shape != (3,) or not np.all(np.isfinite(state)):
+            return self._result_without_plan(state, n_real, ignored, start, "invalid state")
+        params = self._parameters(state, reference, obstacles, t)
+        guess = self._initial_guess(state, params)
+        p_vec = params.to_vector()
+        try:
+            raw = self._backend.solve(p_vec, guess.to_vector(self._layout))
+        except Exception as exc:  # noqa: BLE001 - a control loop must survive any solver error
+            raw = RawSolution(guess.to_vector(self._layout), False, f"exception: {exc}", -1)
+        plan = Plan.from_vector(raw.decision, self._layout)
+        safety, barriers, _ = self._problem.diagnostics(raw.decision, p_vec)
+        safety = np.asarray(safety, dtype=float).reshape(-1)
+        barriers = np.asarray(barriers, dtype=float).reshape(self.config.obstacle_slots, -1)
+        per_slot = max(safety.size // max(self.config.obstacle_slots, 1), 1)
+        active = int(np.sum(safety[: n_real * per_slot] <= ACTIVE_TOL)) if safety.size else 0
+
+        if raw.success:
+            self._plan, self._plan_age = plan, 0
+            control, fallback = plan.controls[0].copy(), "none"
+        else:
+            control, fallback = self._fallback(params, n_real)
+        return ControlResult(
+            control=control,
+            predicted_states=plan.states,
+            predicted_controls=plan.controls,
+            clf_slack=plan.clf_slack,
+            decay_slack=plan.decay_slack,
+            predicted_barrier=barriers[:n_real],
+            safety_active=active if raw.success else 0,
+            status=raw.status,
+            success=raw.success,
+            fallback=fallback,
+            iterations=raw.iterations,
+            solve_time_s=time.perf_counter() - start,
+            obstacles_considered=n_real,
+            obstacles_ignored=ignored,
+        )
+
+    def _result_without_plan(
+        self, state: np.ndarray, n_real: int, ignored: int, start: float, status: str
+    ) -> ControlResult:
+        n = self.config.horizon
+        return ControlResult(
+            control=BRAKE.copy(),
+            predicted_states=np.full((n + 1, 3), np.nan),
+            predicted_controls=np.zeros((n, 2)),
+            clf_slack=np.zeros(n),
+            decay_slack=np.ones(n),
+            predicted_barrier=np.full((n_real, n + 1), np.nan),
+            safety_active=0,
+            status=status,
+            success=False,
+            fallback="brake",
+            iterations=-1,
+            solve_time_s=time.perf_counter() - start,
+            obstacles_considered=n_real,
+            obstacles_ignored=ignored,
+        )

@@ -1,0 +1,91 @@
+"""`husky-sim` command line. User mistakes give one line on stderr and exit code 2."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from collections.abc import Sequence
+
+from controllers import SAFETY_CONSTRAINTS, ConfigError
+
+
+class UsageError(Exception):
+    """A user mistake: printed as one line, exit code 2."""
+
+
+def _positive_int(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected an integer >= 1, got {text!r}") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"expected an integer >= 1, got {value}")
+    return value
+
+
+def _unit_float(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number in [0, 1], got {text!r}") from None
+    if not 0.0 <= value <= 1.0:
+        raise argparse.ArgumentTypeError(f"expected a number in [0, 1], got {value}")
+    return value
+
+
+def _cmd_bench(args: argparse.Namespace) -> int:
+    from husky_sim.bench import format_table, records_json, run_bench
+
+    records = run_bench(
+        variants=args.variants,
+        horizons=args.horizons,
+        obstacle_counts=args.obstacles,
+        solvers=args.solvers,
+        steps=args.steps,
+        gamma=args.gamma,
+        progress=not args.json,
+    )
+    if args.json:
+        print(records_json(records))
+    else:
+        print(f"closed-loop solve times over {args.steps} control steps (kinematic point stabilisation)")
+        print(format_table(records))
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="husky-sim", description="Husky A200 NMPC-CLF/CBF validation suite")
+    sub = parser.add_subparsers(dest="command", required=True)
+    bench = sub.add_parser("bench", help="NMPC solve-time benchmark: ours vs a casadi.Opti baseline")
+    bench.add_argument("--json", action="store_true", help="print JSON records instead of a table")
+    bench.add_argument(
+        "--steps", type=_positive_int, default=150, help="control steps per cell (default 150)"
+    )
+    bench.add_argument("--variants", nargs="+", choices=SAFETY_CONSTRAINTS, default=list(SAFETY_CONSTRAINTS))
+    bench.add_argument("--horizons", nargs="+", type=_positive_int, default=[5, 7, 12])
+    bench.add_argument(
+        "--obstacles", nargs="+", type=int, choices=range(1, 8), default=[1, 7], metavar="{1..7}"
+    )
+    bench.add_argument("--solvers", nargs="+", choices=("nlpsol", "opti"), default=["nlpsol", "opti"])
+    bench.add_argument(
+        "--gamma", type=_unit_float, default=0.1, help="CBF decay rate in [0, 1] (default 0.1)"
+    )
+    bench.set_defaults(func=_cmd_bench)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        return args.func(args)
+    except (UsageError, ConfigError, ValueError) as exc:
+        print(f"husky-sim: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("husky-sim: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

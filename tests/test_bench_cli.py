@@ -1,0 +1,60 @@
+"""`husky-sim bench` runs real closed loops with both backends and prints the documented JSON."""
+
+import json
+
+import pytest
+
+from husky_sim.cli import main
+
+
+def test_bench_json_records(capsys: pytest.CaptureFixture[str]) -> None:
+    code = main(
+        [
+            "bench",
+            "--json",
+            "--steps",
+            "4",
+            "--variants",
+            "relax-cbf",
+            "bt",
+            "--horizons",
+            "5",
+            "--obstacles",
+            "1",
+            "7",
+        ]
+    )
+    assert code == 0
+    records = json.loads(capsys.readouterr().out)
+    assert len(records) == 2 * 2 * 2
+    keys = {"variant", "horizon", "obstacles", "solver", "median_ms", "p95_ms", "max_ms"}
+    for rec in records:
+        assert keys <= rec.keys()
+        assert rec["horizon"] == 5 and rec["obstacles"] in (1, 7)
+        assert 0 < rec["median_ms"] <= rec["p95_ms"] <= rec["max_ms"]
+        assert rec["fallbacks"] == 0
+    solvers = {rec["solver"] for rec in records}
+    assert "nlpsol" in solvers and any("opti" in s for s in solvers)
+
+
+def test_bench_table_has_ratio(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["bench", "--steps", "3", "--variants", "cbf", "--horizons", "5", "--obstacles", "1"]) == 0
+    out = capsys.readouterr().out
+    assert "| cbf | 5 | 1 |" in out and "x |" in out
+
+
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["bench", "--horizons", "0"],
+        ["bench", "--steps", "-2"],
+        ["bench", "--gamma", "1.5"],
+        ["bench", "--variants", "mode3"],
+        ["bench", "--obstacles", "9"],
+    ],
+)
+def test_bench_bad_input_exits_2(argv: list[str], capsys: pytest.CaptureFixture[str]) -> None:
+    with pytest.raises(SystemExit) as exc:
+        main(argv)
+    assert exc.value.code == 2
+    assert "error:" in capsys.readouterr().err
