@@ -53,6 +53,18 @@ def _cmd_bench(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_bench_sim(args: argparse.Namespace) -> int:
+    from husky_sim.bench_sim import run_sim_bench
+
+    print(run_sim_bench(duration_s=args.duration).report())
+    if args.drive_table:
+        from husky_sim.bench_sim import drive_table
+
+        print("\nachieved versus commanded body velocity on flat ground (published drive limits)")
+        print(drive_table())
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="husky-sim", description="Husky A200 NMPC-CLF/CBF validation suite")
     sub = parser.add_subparsers(dest="command", required=True)
@@ -71,6 +83,12 @@ def build_parser() -> argparse.ArgumentParser:
         "--gamma", type=_unit_float, default=0.1, help="CBF decay rate in [0, 1] (default 0.1)"
     )
     bench.set_defaults(func=_cmd_bench)
+    bench_sim = sub.add_parser("bench-sim", help="PyBullet real-time factor and peak memory")
+    bench_sim.add_argument("--duration", type=float, default=30.0, help="episode length in s (default 30)")
+    bench_sim.add_argument(
+        "--drive-table", action="store_true", help="also print achieved vs commanded v and omega"
+    )
+    bench_sim.set_defaults(func=_cmd_bench_sim)
     return parser
 
 

@@ -58,3 +58,13 @@ def test_bench_bad_input_exits_2(argv: list[str], capsys: pytest.CaptureFixture[
         main(argv)
     assert exc.value.code == 2
     assert "error:" in capsys.readouterr().err
+
+
+def test_bench_sim_reports_real_time_factors() -> None:
+    from husky_sim.bench_sim import run_sim_bench
+
+    bench = run_sim_bench(duration_s=1.0, stepping_steps=240)
+    assert bench.episode_sim_s == pytest.approx(1.0)
+    assert bench.episode_wall_s > 0 and bench.stepping_wall_s > 0 and bench.checked_stepping_wall_s > 0
+    assert 0 < bench.peak_rss_mb < 2000
+    assert "x real time" in bench.report()

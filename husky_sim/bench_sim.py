@@ -1,0 +1,148 @@
+"""`husky-sim bench-sim`: real-time factor of a closed-loop PyBullet episode and of bare physics
+stepping with 8 obstacles, plus the process's peak memory."""
+
+from __future__ import annotations
+
+import math
+import resource
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from controllers import NMPCConfig, NMPCController, SetPoint
+from husky_sim.collision import ClearanceMonitor
+from husky_sim.drive import DriveConfig, SkidSteerDrive
+from husky_sim.episode import EpisodeConfig, Outcomes, run_episode
+from husky_sim.robot import HuskyRobot
+from husky_sim.world import ObstacleSpec, World, WorldConfig
+
+#: Eight cylinders around the Husky's path; two of them move.
+BENCH_OBSTACLES = (
+    ObstacleSpec(0.1, 4.7, 0.6),
+    ObstacleSpec(-1.8, 2.5, 0.4),
+    ObstacleSpec(1.8, 6.5, 0.5),
+    ObstacleSpec(-1.6, 8.0, 0.4),
+    ObstacleSpec(2.2, 2.0, 0.3),
+    ObstacleSpec(3.0, 7.5, 0.3, vx_mps=-0.2),
+    ObstacleSpec(-3.0, 5.5, 0.25, vx_mps=0.1, vy_mps=0.05),
+    ObstacleSpec(0.0, 12.5, 0.4),
+)
+
+
+@dataclass(frozen=True)
+class SimBench:
+    episode_sim_s: float
+    episode_wall_s: float
+    episode_outcome: str
+    solve_ms_median: float
+    stepping_steps: int
+    stepping_wall_s: float
+    checked_stepping_wall_s: float
+    peak_rss_mb: float
+
+    def report(self) -> str:
+        ep_rtf = self.episode_sim_s / self.episode_wall_s
+        bare = self.stepping_steps / self.stepping_wall_s
+        checked = self.stepping_steps / self.checked_stepping_wall_s
+        return "\n".join(
+            [
+                f"closed-loop episode (relax-cbf, N = 5, tau = 0.1 s, 240 Hz physics, 8 obstacles): "
+                f"{self.episode_sim_s:.1f} s simulated in {self.episode_wall_s:.2f} s wall "
+                f"= {ep_rtf:.1f}x real time "
+                f"(outcome {self.episode_outcome}, solve median {self.solve_ms_median:.2f} ms)",
+                f"bare physics stepping, Husky + 8 obstacles: {bare:.0f} steps/s "
+                f"= {bare / 240:.1f}x real time",
+                f"stepping + per-step clearance check: {checked:.0f} steps/s "
+                f"= {checked / 240:.1f}x real time",
+                f"peak resident memory of this process: {self.peak_rss_mb:.0f} MB",
+            ]
+        )
+
+
+def drive_open_loop(
+    command: tuple[float, float], ground_friction: float, seconds: float = 6.0, physics_hz: float = 240.0
+) -> tuple[np.ndarray, np.ndarray]:
+    """Hold a body command [v, omega] on flat ground; return the mean achieved [v, yaw rate] over
+    the second half of the run and the applied (limited) command of every physics step."""
+    with World(WorldConfig(physics_hz=physics_hz, ground_friction=ground_friction)) as world:
+        robot = HuskyRobot(world.client, (0.0, 0.0, 0.0))
+        cfg = DriveConfig()
+        drive = SkidSteerDrive(cfg, robot.geometry.wheel_radius_m, robot.geometry.track_width_m)
+        achieved, applied = [], []
+        steps = int(seconds * physics_hz)
+        for k in range(steps):
+            a = drive.limit(np.array(command), world.dt_s)
+            applied.append(a)
+            robot.command_wheels(*drive.wheel_speeds(a), cfg.wheel_torque_limit_nm)
+            world.step()
+            if k >= steps // 2:
+                achieved.append(robot.body_velocity())
+        return np.mean(achieved, axis=0), np.array(applied)
+
+
+DRIVE_TABLE_COMMANDS = ((0.5, 0.0), (1.0, 0.0), (0.0, 0.5), (0.0, 1.0), (0.5, 0.5), (0.3, -0.3))
+
+
+def drive_table(frictions: tuple[float, ...] = (1.0, 0.5)) -> str:
+    """Markdown table of achieved versus commanded v and omega on flat ground."""
+    lines = [
+        "| ground mu | v cmd (m/s) | omega cmd (rad/s) | v achieved | omega achieved "
+        "| v ratio | omega ratio |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for mu in frictions:
+        for v, w in DRIVE_TABLE_COMMANDS:
+            (va, wa), _ = drive_open_loop((v, w), mu)
+            vr = f"{va / v:.2f}" if v else "-"
+            wr = f"{wa / w:.2f}" if w else "-"
+            lines.append(f"| {mu} | {v} | {w} | {va:.3f} | {wa:.3f} | {vr} | {wr} |")
+    return "\n".join(lines)
+
+
+def run_sim_bench(duration_s: float = 30.0, stepping_steps: int = 7200) -> SimBench:
+    start = (0.0, 0.0, math.pi / 2)
+    config = EpisodeConfig(
+        start=start,
+        tau_s=0.1,
+        duration_s=duration_s,
+        world=WorldConfig(obstacles=BENCH_OBSTACLES),
+        outcomes=Outcomes(stop_early=False, stop_on_collision=False),
+    )
+    nmpc = NMPCController(
+        NMPCConfig(safety="relax-cbf", horizon=5, gamma=0.1, robot_radius_m=0.65, obstacle_slots=8)
+    )
+    t0 = time.perf_counter()
+    result = run_episode(nmpc, SetPoint(0.0, 10.0, math.pi / 2), config, robot_radius_m=0.65)
+    episode_wall = time.perf_counter() - t0
+
+    walls = []
+    for check in (False, True):
+        with World(WorldConfig(obstacles=BENCH_OBSTACLES)) as world:
+            robot = HuskyRobot(world.client, start)
+            drive = SkidSteerDrive(DriveConfig(), robot.geometry.wheel_radius_m, robot.geometry.track_width_m)
+            monitor = ClearanceMonitor(
+                world.client,
+                robot.body,
+                world.obstacle_ids,
+                [o.radius_m for o in BENCH_OBSTACLES],
+                robot.geometry.footprint_radius_m + 0.02,
+            )
+            t0 = time.perf_counter()
+            for _ in range(stepping_steps):
+                robot.command_wheels(*drive.wheel_speeds(drive.limit(np.array([0.5, 0.1]), world.dt_s)), 40.0)
+                world.step()
+                if check:
+                    monitor.distances(robot.pose()[:2], world.obstacle_centres())
+            walls.append(time.perf_counter() - t0)
+    peak_mb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+    return SimBench(
+        result.metrics.sim_time_s,
+        episode_wall,
+        result.metrics.outcome,
+        result.metrics.solve_ms_median,
+        stepping_steps,
+        walls[0],
+        walls[1],
+        peak_mb,
+    )

@@ -1,0 +1,308 @@
+"""Closed-loop episode: the Husky in PyBullet driven by a controller, gymnasium-style.
+
+Physics runs at `physics_hz`; every tau seconds the runner senses, calls the controller and holds
+its command (through the drive's limits) until the next control step. Collision is checked by the
+physics engine every physics step (husky_sim.collision). Each control step writes one log row,
+flushed at once, so a run that is interrupted or fails keeps what it logged.
+
+Determinism: the same scenario, seed and code give the same log, except the wall-clock columns
+(`solve_ms`, and anything that depends on it: deadline mode holds a command when a solve is slower
+than tau, so deadline-mode runs are only as repeatable as the machine's timing).
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from controllers import Controller, ControlResult, Reference, SetPoint
+from controllers.model import wrap_angle
+from husky_sim.collision import ClearanceMonitor
+from husky_sim.drive import DriveConfig, SkidSteerDrive
+from husky_sim.metrics import EpisodeMetrics, summarise
+from husky_sim.robot import HuskyRobot, WheelFriction
+from husky_sim.sensing import SensingConfig, Sensor
+from husky_sim.world import World, WorldConfig
+
+#: Columns whose values are wall-clock measurements (excluded from determinism comparisons).
+WALL_CLOCK_COLUMNS = ("solve_ms",)
+
+LOG_COLUMNS = (
+    "step",
+    "t_s",
+    "x_m",
+    "y_m",
+    "yaw_rad",
+    "ref_x_m",
+    "ref_y_m",
+    "ref_yaw_rad",
+    "v_cmd_mps",
+    "omega_cmd_radps",
+    "v_applied_mps",
+    "omega_applied_radps",
+    "v_body_mps",
+    "omega_body_radps",
+    "wheel_l1_radps",
+    "wheel_l2_radps",
+    "wheel_r1_radps",
+    "wheel_r2_radps",
+    "clearance_m",
+    "s_h_min",
+    "s_v_max",
+    "safety_active",
+    "iterations",
+    "status",
+    "fallback",
+    "deadline_miss",
+    "solve_ms",
+)
+
+
+@dataclass(frozen=True)
+class Outcomes:
+    """Thresholds that name an episode's outcome."""
+
+    goal_position_m: float = 0.1  # point stabilisation: position error bound
+    goal_heading_rad: float = 0.1  # point stabilisation: heading error bound
+    goal_hold_s: float = 1.0  # both bounds held this long -> reached
+    tracking_settle_s: float = 10.0  # tracking RMSE counted after this time
+    tracking_rmse_m: float = 0.3  # tracking converged when RMSE <= this
+    stuck_window_steps: int = 10  # mean |v| over this many control steps ...
+    stuck_speed_mps: float = 0.05  # ... below this, away from the reference -> stuck
+    stuck_grace_s: float = 2.0  # no stuck verdict before this time
+    stop_on_collision: bool = True
+    stop_early: bool = True  # end the episode once reached or stuck (else run the full duration)
+
+
+@dataclass(frozen=True)
+class EpisodeConfig:
+    """Everything the runner needs besides the controller and the reference."""
+
+    start: tuple[float, float, float]  # (x m, y m, yaw rad)
+    tau_s: float = 0.1
+    duration_s: float = 30.0
+    world: WorldConfig = field(default_factory=WorldConfig)
+    drive: DriveConfig = field(default_factory=DriveConfig)
+    wheel_friction: WheelFriction = field(default_factory=WheelFriction)
+    sensing: SensingConfig = field(default_factory=SensingConfig)
+    outcomes: Outcomes = field(default_factory=Outcomes)
+    payload_kg: float = 0.0
+    deadline_mode: bool = False  # a solve slower than tau holds the previous command
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        if not self.tau_s > 0:
+            raise ValueError(f"tau_s: must be > 0 s, got {self.tau_s}")
+        if not self.duration_s > 0:
+            raise ValueError(f"duration_s: must be > 0 s, got {self.duration_s}")
+        ratio = self.world.physics_hz * self.tau_s
+        if abs(ratio - round(ratio)) > 1e-6 or round(ratio) < 1:
+            raise ValueError(
+                f"tau_s: must be a whole number of physics steps (physics_hz x tau_s = {ratio:g})"
+            )
+
+
+@dataclass
+class EpisodeResult:
+    """Metrics plus the per-step arrays (the same data as the log)."""
+
+    metrics: EpisodeMetrics
+    rows: list[dict[str, object]]
+    predicted_states: list[np.ndarray]  # per control step, (N+1, 3)
+
+
+class _Log:
+    """CSV log flushed row by row."""
+
+    def __init__(self, path: Path | None) -> None:
+        self._file = None
+        if path is not None:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            self._file = path.open("w", newline="")
+            self._writer = csv.DictWriter(self._file, fieldnames=LOG_COLUMNS)
+            self._writer.writeheader()
+            self._file.flush()
+
+    def write(self, row: dict[str, object]) -> None:
+        if self._file is not None:
+            self._writer.writerow({k: _fmt(row[k]) for k in LOG_COLUMNS})
+            self._file.flush()
+
+    def close(self) -> None:
+        if self._file is not None:
+            self._file.close()
+
+
+def _fmt(value: object) -> object:
+    return f"{value:.9g}" if isinstance(value, float) else value
+
+
+def _reference_error(state: np.ndarray, ref: np.ndarray) -> tuple[float, float]:
+    return float(np.hypot(*(state[:2] - ref[:2]))), abs(float(wrap_angle(state[2] - ref[2])))
+
+
+def run_episode(
+    controller: Controller,
+    reference: Reference,
+    config: EpisodeConfig,
+    log_path: Path | None = None,
+    robot_radius_m: float | None = None,
+) -> EpisodeResult:
+    """Run one closed-loop episode in a fresh PyBullet world and return its metrics."""
+    wall_start = time.perf_counter()
+    world = World(config.world)
+    log = _Log(log_path)
+    try:
+        return _run(world, log, controller, reference, config, robot_radius_m, wall_start)
+    finally:
+        log.close()
+        world.close()
+
+
+def _run(
+    world: World,
+    log: _Log,
+    controller: Controller,
+    reference: Reference,
+    config: EpisodeConfig,
+    robot_radius_m: float | None,
+    wall_start: float,
+) -> EpisodeResult:
+    robot = HuskyRobot(world.client, config.start, config.wheel_friction, config.payload_kg)
+    drive = SkidSteerDrive(config.drive, robot.geometry.wheel_radius_m, robot.geometry.track_width_m)
+    sensor = Sensor(config.sensing, config.seed)
+    monitor = ClearanceMonitor(
+        world.client,
+        robot.body,
+        world.obstacle_ids,
+        [o.radius_m for o in config.world.obstacles],
+        robot.geometry.footprint_radius_m + 0.02,
+    )
+    outcomes = config.outcomes
+    substeps = round(config.world.physics_hz * config.tau_s)
+    steps = int(math.ceil(config.duration_s / config.tau_s - 1e-9))
+    hold_steps = max(round(outcomes.goal_hold_s / config.tau_s), 1)
+    is_setpoint = isinstance(reference, SetPoint)
+    controller.reset()
+
+    rows: list[dict[str, object]] = []
+    plans: list[np.ndarray] = []
+    results: list[ControlResult] = []
+    applied_history: list[np.ndarray] = [drive.applied]
+    command = np.zeros(2)
+    outcome, in_tolerance, reached_at = None, 0, None
+    for k in range(steps):
+        t = k * config.tau_s
+        pose = robot.pose()
+        measurement = sensor.measure(pose, world.obstacle_states())
+        result = controller.solve(measurement.pose, reference, measurement.obstacles, t)
+        deadline_miss = config.deadline_mode and result.solve_time_s > config.tau_s
+        if not deadline_miss:
+            command = np.asarray(result.control, dtype=float)
+        clearance = math.inf
+        for _ in range(substeps):
+            applied = drive.limit(command, world.dt_s)
+            applied_history.append(applied)
+            robot.command_wheels(*drive.wheel_speeds(applied), config.drive.wheel_torque_limit_nm)
+            world.step()
+            if world.obstacle_ids:
+                distances = monitor.distances(robot.pose()[:2], world.obstacle_centres())
+                clearance = min(clearance, float(np.min(distances)))
+        new_pose = robot.pose()
+        ref_now = reference.state_at(t)
+        body = robot.body_velocity()
+        wheels = robot.wheel_speeds()
+        row = {
+            "step": k,
+            "t_s": t,
+            "x_m": pose[0],
+            "y_m": pose[1],
+            "yaw_rad": pose[2],
+            "ref_x_m": ref_now[0],
+            "ref_y_m": ref_now[1],
+            "ref_yaw_rad": float(wrap_angle(ref_now[2])),
+            "v_cmd_mps": float(command[0]),
+            "omega_cmd_radps": float(command[1]),
+            "v_applied_mps": float(applied[0]),
+            "omega_applied_radps": float(applied[1]),
+            "v_body_mps": float(body[0]),
+            "omega_body_radps": float(body[1]),
+            "wheel_l1_radps": float(wheels[0]),
+            "wheel_l2_radps": float(wheels[1]),
+            "wheel_r1_radps": float(wheels[2]),
+            "wheel_r2_radps": float(wheels[3]),
+            "clearance_m": clearance,
+            "s_h_min": float(np.min(result.decay_slack)),
+            "s_v_max": float(np.max(result.clf_slack)),
+            "safety_active": int(result.safety_active),
+            "iterations": int(result.iterations),
+            "status": result.status,
+            "fallback": result.fallback,
+            "deadline_miss": int(deadline_miss),
+            "solve_ms": 1000.0 * result.solve_time_s,
+        }
+        log.write(row)
+        rows.append(row)
+        plans.append(result.predicted_states)
+        results.append(result)
+
+        t_next = t + config.tau_s
+        if clearance <= 0.0 and outcomes.stop_on_collision:
+            outcome = "collided"
+            break
+        pos_err, head_err = _reference_error(new_pose, reference.state_at(t_next))
+        if is_setpoint:
+            ok = pos_err <= outcomes.goal_position_m and head_err <= outcomes.goal_heading_rad
+            in_tolerance = in_tolerance + 1 if ok else 0
+            reached_at = t_next if in_tolerance == 1 else reached_at
+            if in_tolerance >= hold_steps and outcome is None:
+                outcome = "reached"
+                if outcomes.stop_early:
+                    break
+        away = pos_err > (outcomes.goal_position_m if is_setpoint else outcomes.tracking_rmse_m)
+        window = [abs(r["v_body_mps"]) for r in rows[-outcomes.stuck_window_steps :]]
+        if (
+            away
+            and t_next >= outcomes.stuck_grace_s
+            and len(window) == outcomes.stuck_window_steps
+            and float(np.mean(window)) < outcomes.stuck_speed_mps
+            and outcome is None
+        ):
+            outcome = "stuck"
+            if outcomes.stop_early:
+                break
+    metrics = summarise(
+        rows,
+        np.array(applied_history),
+        world.dt_s,
+        reference,
+        is_setpoint,
+        outcome,
+        reached_at,
+        outcomes,
+        config.tau_s,
+        time.perf_counter() - wall_start,
+        robot_radius_m=robot_radius_m,
+        footprint_radius_m=robot.geometry.footprint_radius_m,
+        final_pose=robot.pose(),
+        sim_time_s=world.time_s,
+    )
+    return EpisodeResult(metrics, rows, plans)
+
+
+def compare_logs(a: Sequence[dict[str, object]], b: Sequence[dict[str, object]]) -> list[str]:
+    """Columns (other than wall-clock ones) that differ between two logs; empty if identical."""
+    if len(a) != len(b):
+        return ["length"]
+    diff = set()
+    for ra, rb in zip(a, b, strict=True):
+        for key in LOG_COLUMNS:
+            if key not in WALL_CLOCK_COLUMNS and ra[key] != rb[key]:
+                diff.add(key)
+    return sorted(diff)

@@ -1,0 +1,127 @@
+"""Per-episode metrics and the outcome name, computed from the per-step log rows."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import asdict, dataclass
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from controllers import Reference
+from controllers.model import wrap_angle
+
+if TYPE_CHECKING:
+    from husky_sim.episode import Outcomes
+
+OUTCOMES = ("reached", "tracking", "stuck", "collided", "timeout")
+
+
+@dataclass(frozen=True)
+class EpisodeMetrics:
+    """Headline figures of one episode (units in the names)."""
+
+    outcome: str
+    collided: bool
+    converged: bool
+    min_clearance_m: float | None
+    final_position_error_m: float
+    final_heading_error_rad: float
+    tracking_rmse_m: float | None
+    time_to_goal_s: float | None
+    path_length_m: float
+    reversals: int  # times the command went from forward/standing to backward (v < -0.01 m/s)
+    reverse_steps: int  # control steps commanding v < -0.01 m/s
+    max_abs_v_mps: float  # applied (after the drive's limits)
+    max_abs_omega_radps: float
+    max_abs_linear_accel_mps2: float
+    max_abs_angular_accel_radps2: float
+    solve_ms_median: float
+    solve_ms_p95: float
+    solve_ms_max: float
+    fallbacks: int
+    deadline_misses: int
+    safety_active_steps: int
+    steps: int
+    sim_time_s: float
+    wall_time_s: float
+    robot_radius_m: float | None
+    footprint_radius_m: float
+    robot_radius_below_footprint: bool  # the controller's circle is smaller than the real body
+
+    def as_dict(self) -> dict[str, object]:
+        return asdict(self)
+
+
+def summarise(
+    rows: Sequence[dict[str, object]],
+    applied: np.ndarray,
+    physics_dt_s: float,
+    reference: Reference,
+    is_setpoint: bool,
+    outcome: str | None,
+    reached_at: float | None,
+    outcomes: Outcomes,
+    tau_s: float,
+    wall_time_s: float,
+    *,
+    robot_radius_m: float | None,
+    footprint_radius_m: float,
+    final_pose: np.ndarray,
+    sim_time_s: float,
+) -> EpisodeMetrics:
+    """Metrics of an episode whose rows were logged by husky_sim.episode."""
+    col = {key: np.array([r[key] for r in rows]) for key in rows[0]} if rows else {}
+    poses = np.vstack([np.column_stack([col["x_m"], col["y_m"], col["yaw_rad"]]), final_pose])
+    t_end = len(rows) * tau_s
+    ref_end = reference.state_at(t_end)
+    final_pos = float(np.hypot(*(final_pose[:2] - ref_end[:2])))
+    final_head = abs(float(wrap_angle(final_pose[2] - ref_end[2])))
+    clearance = col["clearance_m"]
+    min_clear = float(np.min(clearance)) if np.any(np.isfinite(clearance)) else None  # None: no obstacles
+    collided = min_clear is not None and min_clear <= 0.0
+    rmse = None
+    if not is_setpoint:
+        errs = np.hypot(col["x_m"] - col["ref_x_m"], col["y_m"] - col["ref_y_m"])
+        settled = col["t_s"] >= outcomes.tracking_settle_s
+        rmse = float(np.sqrt(np.mean(errs[settled] ** 2))) if np.any(settled) else None
+    if outcome is None:
+        outcome = "collided" if collided else ("timeout" if is_setpoint else "tracking")
+    converged = (
+        (outcome == "reached")
+        if is_setpoint
+        else (outcome == "tracking" and rmse is not None and rmse <= outcomes.tracking_rmse_m)
+    )
+    backwards = col["v_cmd_mps"] < -0.01
+    reversals = int(np.sum(backwards[1:] & ~backwards[:-1]) + int(backwards[0]))
+    accel = np.abs(np.diff(applied, axis=0)) / physics_dt_s if len(applied) > 1 else np.zeros((1, 2))
+    solve = col["solve_ms"]
+    return EpisodeMetrics(
+        outcome=outcome,
+        collided=collided,
+        converged=bool(converged),
+        min_clearance_m=min_clear,
+        final_position_error_m=final_pos,
+        final_heading_error_rad=final_head,
+        tracking_rmse_m=rmse,
+        time_to_goal_s=reached_at if outcome == "reached" else None,
+        path_length_m=float(np.sum(np.hypot(*np.diff(poses[:, :2], axis=0).T))),
+        reversals=reversals,
+        reverse_steps=int(np.sum(backwards)),
+        max_abs_v_mps=float(np.max(np.abs(applied[:, 0]))),
+        max_abs_omega_radps=float(np.max(np.abs(applied[:, 1]))),
+        max_abs_linear_accel_mps2=float(np.max(accel[:, 0])),
+        max_abs_angular_accel_radps2=float(np.max(accel[:, 1])),
+        solve_ms_median=float(np.median(solve)),
+        solve_ms_p95=float(np.percentile(solve, 95)),
+        solve_ms_max=float(np.max(solve)),
+        fallbacks=int(np.sum(col["fallback"] != "none")),
+        deadline_misses=int(np.sum(col["deadline_miss"])),
+        safety_active_steps=int(np.sum(col["safety_active"] > 0)),
+        steps=len(rows),
+        sim_time_s=sim_time_s,
+        wall_time_s=wall_time_s,
+        robot_radius_m=robot_radius_m,
+        footprint_radius_m=footprint_radius_m,
+        robot_radius_below_footprint=robot_radius_m is not None and robot_radius_m < footprint_radius_m,
+    )
