@@ -15,17 +15,12 @@ from husky_sim.collision import ClearanceMonitor
 from husky_sim.drive import DriveConfig, SkidSteerDrive
 from husky_sim.episode import EpisodeConfig, Outcomes, run_episode
 from husky_sim.robot import HuskyRobot
-from husky_sim.world import ObstacleSpec, World, WorldConfig
+from husky_sim.scenarios_kinematic import CLUTTERED_POINT_STABILISATION
+from husky_sim.world import ObstacleSpec, World, WorldConfig, obstacle_specs_from
 
-#: Eight cylinders around the Husky's path; two of them move.
+#: The kinematic benchmark's seven obstacles (two moving) plus one beyond the goal.
 BENCH_OBSTACLES = (
-    ObstacleSpec(0.1, 4.7, 0.6),
-    ObstacleSpec(-1.8, 2.5, 0.4),
-    ObstacleSpec(1.8, 6.5, 0.5),
-    ObstacleSpec(-1.6, 8.0, 0.4),
-    ObstacleSpec(2.2, 2.0, 0.3),
-    ObstacleSpec(3.0, 7.5, 0.3, vx_mps=-0.2),
-    ObstacleSpec(-3.0, 5.5, 0.25, vx_mps=0.1, vy_mps=0.05),
+    *obstacle_specs_from(CLUTTERED_POINT_STABILISATION.obstacles),
     ObstacleSpec(0.0, 12.5, 0.4),
 )
 
