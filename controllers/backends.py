@@ -176,7 +176,7 @@ class OptiBackend:
         opti.subject_to(opti.bounded(-config.omega_max_radps, u[1, :], config.omega_max_radps))
         opti.subject_to(s_v >= 0)
         if layout.has_decay_slack:
-            opti.subject_to(s_h >= 0)
+            opti.subject_to(opti.bounded(0, s_h, 1))
         opti.solver("ipopt", ipopt_options(config.solver))
         self._opti, self._p = opti, p
         self._variables = [x, u, s_v] + ([s_h] if layout.has_decay_slack else [])

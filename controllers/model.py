@@ -52,7 +52,8 @@ def wrap_angle(angle: float | np.ndarray) -> float | np.ndarray:
 
 
 def wrap_angle_sym(angle: ca.SX | ca.MX) -> ca.SX | ca.MX:
-    """Symbolic heading-error wrap to (-pi, pi] via atan2(sin a, cos a): smooth with unit slope
-    everywhere except the jump at +-pi, which the controller keeps away from by unwrapping the
-    reference headings next to the measured heading before each solve."""
+    """Symbolic heading-error wrap to (-pi, pi] via atan2(sin a, cos a): unit slope everywhere,
+    one jump at +-pi (a robot facing exactly opposite to the reference heading, where turning
+    either way is equally good), and invariant to 2 pi k in the state or the reference, so a
+    heading that grows without bound (circle tracking) costs the same as its wrapped value."""
     return ca.atan2(ca.sin(angle), ca.cos(angle))

@@ -20,7 +20,6 @@ import numpy as np
 from controllers.backends import BACKENDS, RawSolution, sx_problem
 from controllers.config import NMPCConfig
 from controllers.interface import ControlResult, FallbackKind
-from controllers.model import wrap_angle
 from controllers.obstacles import Obstacle, predict_obstacles
 from controllers.ocp import OCPParameters, Plan
 from controllers.references import Reference
@@ -55,10 +54,6 @@ class NMPCController:
     ) -> OCPParameters:
         cfg = self.config
         ref_states, ref_controls = reference.sample(t, cfg.tau_s, cfg.horizon)
-        ref_states = ref_states.copy()
-        # Put the reference headings within pi of the measured heading (2 pi k shift), so the
-        # wrapped heading error in the OCP starts far from its +-pi jump.
-        ref_states[:, 2] += (state[2] + wrap_angle(ref_states[0, 2] - state[2])) - ref_states[0, 2]
         centres, radii = predict_obstacles(
             obstacles,
             state[:2],
@@ -97,11 +92,15 @@ class NMPCController:
                 return False
         return True
 
-    def _fallback(self, params: OCPParameters, n_real: int) -> tuple[np.ndarray, FallbackKind]:
+    def _fallback(self, state: np.ndarray, params: OCPParameters, n_real: int) -> tuple[Plan, FallbackKind]:
+        """The plan to follow after a failed solve: the last plan, one step further on, if it is
+        still safe; else a standstill (brake) plan, after which the old plan is dropped."""
         if self._previous_plan_is_safe(params, n_real):
             self._plan_age += 1
-            return self._plan.controls[self._plan_age].copy(), "previous-plan"
-        return BRAKE.copy(), "brake"
+            return self._plan.shifted(self._plan_age), "previous-plan"
+        self._plan, self._plan_age = None, 0
+        n = self.config.horizon
+        return Plan(np.tile(state, (n + 1, 1)), np.zeros((n, 2)), np.zeros(n), np.ones(n)), "brake"
 
     # -- the control step ------------------------------------------------------------------
     def solve(
@@ -112,6 +111,7 @@ class NMPCController:
         n_real = min(len(obstacles), self.config.obstacle_slots)
         ignored = len(obstacles) - n_real
         if state.shape != (3,) or not np.all(np.isfinite(state)):
+            self._plan, self._plan_age = None, 0
             return self._result_without_plan(state, n_real, ignored, start, "invalid state")
         params = self._parameters(state, reference, obstacles, t)
         guess = self._initial_guess(state, params)
@@ -120,26 +120,26 @@ class NMPCController:
             raw = self._backend.solve(p_vec, guess.to_vector(self._layout))
         except Exception as exc:  # noqa: BLE001 - a control loop must survive any solver error
             raw = RawSolution(guess.to_vector(self._layout), False, f"exception: {exc}", -1)
-        plan = Plan.from_vector(raw.decision, self._layout)
-        safety, barriers, _ = self._problem.diagnostics(raw.decision, p_vec)
-        safety = np.asarray(safety, dtype=float).reshape(-1)
-        barriers = np.asarray(barriers, dtype=float).reshape(self.config.obstacle_slots, -1)
-        per_slot = max(safety.size // max(self.config.obstacle_slots, 1), 1)
-        active = int(np.sum(safety[: n_real * per_slot] <= ACTIVE_TOL)) if safety.size else 0
-
         if raw.success:
+            plan, fallback = Plan.from_vector(raw.decision, self._layout), "none"
             self._plan, self._plan_age = plan, 0
-            control, fallback = plan.controls[0].copy(), "none"
         else:
-            control, fallback = self._fallback(params, n_real)
+            plan, fallback = self._fallback(state, params, n_real)
+        safety, barriers, _ = self._problem.diagnostics(plan.to_vector(self._layout), p_vec)
+        safety = np.asarray(safety, dtype=float).reshape(-1)
+        barriers = np.asarray(barriers, dtype=float).reshape(
+            self.config.obstacle_slots, self.config.horizon + 1
+        )
+        per_slot = safety.size // self.config.obstacle_slots if self.config.obstacle_slots else 0
+        active = int(np.sum(safety[: n_real * per_slot] <= ACTIVE_TOL)) if raw.success else 0
         return ControlResult(
-            control=control,
+            control=plan.controls[0].copy(),
             predicted_states=plan.states,
             predicted_controls=plan.controls,
             clf_slack=plan.clf_slack,
             decay_slack=plan.decay_slack,
             predicted_barrier=barriers[:n_real],
-            safety_active=active if raw.success else 0,
+            safety_active=active,
             status=raw.status,
             success=raw.success,
             fallback=fallback,

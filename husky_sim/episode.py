@@ -21,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-from controllers import Controller, ControlResult, Reference, SetPoint
+from controllers import Controller, Reference, SetPoint
 from controllers.model import wrap_angle
 from husky_sim.collision import ClearanceMonitor
 from husky_sim.drive import DriveConfig, SkidSteerDrive
@@ -30,6 +30,10 @@ from husky_sim.robot import HuskyRobot, WheelFriction
 from husky_sim.sensing import SensingConfig, Sensor
 from husky_sim.world import World, WorldConfig
 
+#: One row per control step at time t_s: the true pose, body velocity and wheel speeds at t_s,
+#: the reference at t_s, the command issued at t_s (`*_cmd`) and the drive's limited command at
+#: the end of the step (`*_applied`), the smallest clearance (m) to obstacles and walls over the
+#: step's physics steps, and the solve's slacks, activity, status and wall time.
 #: Columns whose values are wall-clock measurements (excluded from determinism comparisons).
 WALL_CLOCK_COLUMNS = ("solve_ms",)
 
@@ -156,6 +160,12 @@ def run_episode(
 ) -> EpisodeResult:
     """Run one closed-loop episode in a fresh PyBullet world and return its metrics."""
     wall_start = time.perf_counter()
+    controller_tau = getattr(getattr(controller, "config", None), "tau_s", None)
+    if controller_tau is not None and abs(controller_tau - config.tau_s) > 1e-9:
+        raise ValueError(
+            f"tau_s: the episode's control period ({config.tau_s} s) must equal the controller's "
+            f"sampling time ({controller_tau} s)"
+        )
     world = World(config.world)
     log = _Log(log_path)
     try:
@@ -183,6 +193,7 @@ def _run(
         world.obstacle_ids,
         [o.radius_m for o in config.world.obstacles],
         robot.geometry.footprint_radius_m + 0.02,
+        walls=[(body, n, d) for body, (n, d) in zip(world.wall_ids, world.wall_planes, strict=True)],
     )
     outcomes = config.outcomes
     substeps = round(config.world.physics_hz * config.tau_s)
@@ -193,13 +204,12 @@ def _run(
 
     rows: list[dict[str, object]] = []
     plans: list[np.ndarray] = []
-    results: list[ControlResult] = []
     applied_history: list[np.ndarray] = [drive.applied]
     command = np.zeros(2)
     outcome, in_tolerance, reached_at = None, 0, None
     for k in range(steps):
         t = k * config.tau_s
-        pose = robot.pose()
+        pose, body, wheels = robot.pose(), robot.body_velocity(), robot.wheel_speeds()
         measurement = sensor.measure(pose, world.obstacle_states())
         result = controller.solve(measurement.pose, reference, measurement.obstacles, t)
         deadline_miss = config.deadline_mode and result.solve_time_s > config.tau_s
@@ -211,13 +221,14 @@ def _run(
             applied_history.append(applied)
             robot.command_wheels(*drive.wheel_speeds(applied), config.drive.wheel_torque_limit_nm)
             world.step()
-            if world.obstacle_ids:
-                distances = monitor.distances(robot.pose()[:2], world.obstacle_centres())
+            if world.obstacle_ids or world.wall_ids:
+                xy = robot.pose()[:2]
+                distances = np.concatenate(
+                    [monitor.distances(xy, world.obstacle_centres()), monitor.wall_distances(xy)]
+                )
                 clearance = min(clearance, float(np.min(distances)))
         new_pose = robot.pose()
         ref_now = reference.state_at(t)
-        body = robot.body_velocity()
-        wheels = robot.wheel_speeds()
         row = {
             "step": k,
             "t_s": t,
@@ -250,17 +261,18 @@ def _run(
         log.write(row)
         rows.append(row)
         plans.append(result.predicted_states)
-        results.append(result)
 
         t_next = t + config.tau_s
-        if clearance <= 0.0 and outcomes.stop_on_collision:
-            outcome = "collided"
-            break
+        if clearance <= 0.0:
+            outcome = "collided"  # a collision names the episode whatever happens after it
+            if outcomes.stop_on_collision:
+                break
         pos_err, head_err = _reference_error(new_pose, reference.state_at(t_next))
         if is_setpoint:
             ok = pos_err <= outcomes.goal_position_m and head_err <= outcomes.goal_heading_rad
             in_tolerance = in_tolerance + 1 if ok else 0
-            reached_at = t_next if in_tolerance == 1 else reached_at
+            if in_tolerance == 1 and outcome is None:
+                reached_at = t_next  # entry into the tolerance band that is then held
             if in_tolerance >= hold_steps and outcome is None:
                 outcome = "reached"
                 if outcomes.stop_early:

@@ -14,6 +14,7 @@ import numpy as np
 
 from controllers import Controller, Obstacle, Reference, SetPoint
 from controllers.model import step, wrap_angle
+from husky_sim.metrics import count_reversals
 
 
 @dataclass(frozen=True)
@@ -51,8 +52,13 @@ class KinematicEpisode:
 
     @property
     def reversals(self) -> int:
-        """Control steps with a backwards command (v < -1 mm/s)."""
-        return int(np.sum(self.controls[:, 0] < -1e-3))
+        """Times the command switched into reverse (see husky_sim.metrics.count_reversals)."""
+        return count_reversals(self.controls[:, 0])[0]
+
+    @property
+    def reverse_steps(self) -> int:
+        """Control steps commanding reverse."""
+        return count_reversals(self.controls[:, 0])[1]
 
     @property
     def safety_active_steps(self) -> int:

@@ -17,6 +17,18 @@ if TYPE_CHECKING:
 OUTCOMES = ("reached", "tracking", "stuck", "collided", "timeout")
 
 
+#: A command below this (m/s) counts as driving backwards.
+REVERSE_SPEED_MPS = -0.01
+
+
+def count_reversals(v_cmd_mps: np.ndarray) -> tuple[int, int]:
+    """(times the command switched into reverse, control steps commanding reverse)."""
+    backwards = np.asarray(v_cmd_mps) < REVERSE_SPEED_MPS
+    if backwards.size == 0:
+        return 0, 0
+    return int(np.sum(backwards[1:] & ~backwards[:-1]) + int(backwards[0])), int(np.sum(backwards))
+
+
 @dataclass(frozen=True)
 class EpisodeMetrics:
     """Headline figures of one episode (units in the names)."""
@@ -92,8 +104,7 @@ def summarise(
         if is_setpoint
         else (outcome == "tracking" and rmse is not None and rmse <= outcomes.tracking_rmse_m)
     )
-    backwards = col["v_cmd_mps"] < -0.01
-    reversals = int(np.sum(backwards[1:] & ~backwards[:-1]) + int(backwards[0]))
+    reversals, reverse_steps = count_reversals(col["v_cmd_mps"])
     accel = np.abs(np.diff(applied, axis=0)) / physics_dt_s if len(applied) > 1 else np.zeros((1, 2))
     solve = col["solve_ms"]
     return EpisodeMetrics(
@@ -107,7 +118,7 @@ def summarise(
         time_to_goal_s=reached_at if outcome == "reached" else None,
         path_length_m=float(np.sum(np.hypot(*np.diff(poses[:, :2], axis=0).T))),
         reversals=reversals,
-        reverse_steps=int(np.sum(backwards)),
+        reverse_steps=reverse_steps,
         max_abs_v_mps=float(np.max(np.abs(applied[:, 0]))),
         max_abs_omega_radps=float(np.max(np.abs(applied[:, 1]))),
         max_abs_linear_accel_mps2=float(np.max(accel[:, 0])),

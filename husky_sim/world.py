@@ -123,18 +123,19 @@ class World:
         )
 
     def _add_arena(self, half: float | None) -> list[int]:
+        """Four box walls whose inner faces are `half` - 0.1 m from the origin; their half-planes
+        (inward normal n, offset d: inside where n . p <= d) go to `wall_planes`."""
+        self.wall_planes: list[tuple[np.ndarray, float]] = []
         if half is None:
             return []
         cid, thick, height = self.client, 0.1, 0.5
         ids = []
-        for cx, cy, hx, hy in (
-            (half, 0, thick, half),
-            (-half, 0, thick, half),
-            (0, half, half, thick),
-            (0, -half, half, thick),
-        ):
-            shape = p.createCollisionShape(p.GEOM_BOX, halfExtents=[hx, hy, height / 2], physicsClientId=cid)
-            ids.append(p.createMultiBody(0, shape, basePosition=[cx, cy, height / 2], physicsClientId=cid))
+        for nx, ny in ((1.0, 0.0), (-1.0, 0.0), (0.0, 1.0), (0.0, -1.0)):
+            extents = [thick, half + thick, height / 2] if nx else [half + thick, thick, height / 2]
+            shape = p.createCollisionShape(p.GEOM_BOX, halfExtents=extents, physicsClientId=cid)
+            centre = [nx * half, ny * half, height / 2]
+            ids.append(p.createMultiBody(0, shape, basePosition=centre, physicsClientId=cid))
+            self.wall_planes.append((np.array([nx, ny]), half - thick))
         return ids
 
     def _place_obstacles(self, t_s: float) -> None:

@@ -8,7 +8,6 @@ import pytest
 
 from controllers import CircleTrajectory, NMPCConfig, NMPCController, Obstacle, SetPoint
 from controllers.model import step, wrap_angle
-from controllers.obstacles import PARKING_DISTANCE_M
 
 TOL = 1e-6
 VARIANTS = ("none", "bt", "cbf", "relax-cbf")
@@ -31,15 +30,16 @@ def random_case(rng: np.random.Generator) -> tuple[np.ndarray, Obstacle, SetPoin
     return np.array([*pos, heading]), obstacle, goal
 
 
+@pytest.mark.parametrize("backend", ["nlpsol", "opti"])
 @pytest.mark.parametrize("variant", VARIANTS)
-def test_solved_plans_satisfy_their_constraints(variant: str) -> None:
+def test_solved_plans_satisfy_their_constraints(variant: str, backend: str) -> None:
     rng = np.random.default_rng(7)
     cfg = NMPCConfig(safety=variant, gamma=0.1, horizon=6)
     n, gamma = cfg.horizon, cfg.gamma
     w_v = np.array(cfg.clf_weight)
     for _ in range(12):
         state, obstacle, goal = random_case(rng)
-        controller = NMPCController(cfg)
+        controller = NMPCController(cfg, backend=backend)
         res = controller.solve(state, goal, [obstacle], 0.0)
         assert res.success, res.status
         x, u = res.predicted_states, res.predicted_controls
@@ -69,14 +69,15 @@ def test_solved_plans_satisfy_their_constraints(variant: str) -> None:
             assert np.all(b >= -TOL)
 
 
-def test_relax_cbf_inside_the_set_recovers_at_least_at_the_cbf_rate() -> None:
+@pytest.mark.parametrize("backend", ["nlpsol", "opti"])
+def test_relax_cbf_inside_the_set_recovers_at_least_at_the_cbf_rate(backend: str) -> None:
     """A measured state a hair inside the obstacle circle (B < 0) must not let s_h > 1 loosen
     the constraint: predicted B may not sink below (1 - gamma) times its previous value."""
     cfg = NMPCConfig(safety="relax-cbf", gamma=0.1, horizon=7)
     obstacle = Obstacle(0.0, 0.0, 0.6)
     state = np.array([0.0, -0.84, math.pi / 2])  # 0.01 m inside r_sum = 0.85, facing the obstacle
     goal = SetPoint(0.0, 3.0, math.pi / 2)  # straight through the obstacle
-    res = NMPCController(cfg).solve(state, goal, [obstacle], 0.0)
+    res = NMPCController(cfg, backend=backend).solve(state, goal, [obstacle], 0.0)
     assert res.success, res.status
     b = res.predicted_barrier[0]
     assert b[0] < 0
@@ -94,7 +95,14 @@ def test_unused_slots_are_parked_and_change_nothing() -> None:
     assert one.success and three.success
     assert three.obstacles_considered == 1 and three.predicted_barrier.shape[0] == 1
     assert np.allclose(one.control, three.control, atol=1e-5)
-    assert 10 * NMPCConfig(horizon=12).horizon * NMPCConfig().tau_s < PARKING_DISTANCE_M
+
+
+def test_no_obstacle_slots() -> None:
+    res = NMPCController(NMPCConfig(safety="cbf", obstacle_slots=0)).solve(
+        np.array([0.0, 0.0, 0.0]), SetPoint(1.0, 0.0, 0.0), [Obstacle(0.5, 0.0, 0.1)], 0.0
+    )
+    assert res.success and res.obstacles_considered == 0 and res.obstacles_ignored == 1
+    assert res.control[0] > 0  # drives straight through: the obstacle was not considered
 
 
 def test_more_obstacles_than_slots_keeps_the_nearest() -> None:
@@ -170,10 +178,15 @@ def test_failures_fall_back_and_never_raise() -> None:
     second = controller.solve(moved, broken, [obstacle], 0.1)
     assert not second.success and second.fallback == "previous-plan"
     assert np.allclose(second.control, first.predicted_controls[1])
+    assert np.allclose(second.predicted_states[0], first.predicted_states[1])  # the plan followed
     # an obstacle now sits on the old plan: the previous plan is unsafe -> brake
     blocking = Obstacle(*first.predicted_states[3, :2], 0.3)
     third = controller.solve(moved, broken, [blocking], 0.2)
     assert third.fallback == "brake" and np.all(third.control == 0.0)
+    assert np.all(third.predicted_states == moved) and np.all(np.isfinite(third.predicted_barrier))
+    # braking drops the old plan: a further failure may not replay it out of time
+    again = controller.solve(moved, broken, [obstacle], 0.25)
+    assert again.fallback == "brake"
     nan_state = controller.solve(np.array([np.nan, 0.0, 0.0]), goal, [obstacle], 0.3)
     assert nan_state.fallback == "brake" and nan_state.status == "invalid state"
     # after a failure the next good solve succeeds again (cold start)

@@ -62,7 +62,7 @@ def test_deadline_mode_holds_the_command_and_counts_misses() -> None:
         deadline_mode=True,
         world=WorldConfig(physics_hz=1000.0, obstacles=(ObstacleSpec(2.0, 0.3, 0.3),)),
     )
-    nmpc = NMPCController(NMPCConfig(safety="relax-cbf", horizon=12, robot_radius_m=0.65))
+    nmpc = NMPCController(NMPCConfig(safety="relax-cbf", horizon=12, tau_s=0.001, robot_radius_m=0.65))
     m = run_episode(nmpc, SetPoint(4.0, 0.0, 0.0), cfg).metrics
     assert m.deadline_misses >= 40 and m.steps == 50
     assert m.max_abs_v_mps == 0.0  # every command was held at the initial standstill
