@@ -7,6 +7,7 @@ import sys
 from collections.abc import Sequence
 
 from controllers import SAFETY_CONSTRAINTS, ConfigError
+from husky_sim.scenario import ScenarioError
 
 
 class UsageError(Exception):
@@ -65,9 +66,53 @@ def _cmd_bench_sim(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_scenarios(args: argparse.Namespace) -> int:
+    from husky_sim.scenario import load_scenario, shipped_scenarios
+
+    for path in shipped_scenarios():
+        sc = load_scenario(str(path))
+        print(f"{sc.name:34s} {sc.description}")
+    return 0
+
+
+def _cmd_run(args: argparse.Namespace) -> int:
+    from pathlib import Path
+
+    from husky_sim.run import run_dir_name, run_scenario
+    from husky_sim.scenario import load_scenario
+
+    sc = load_scenario(args.scenario)
+    horizon = args.horizon or sc.controller.horizon
+    gamma = sc.controller.gamma if args.gamma is None else args.gamma
+    seed = sc.seed if args.seed is None else args.seed
+    out = (
+        Path(args.out)
+        if args.out
+        else Path("results") / run_dir_name(sc.name, args.controller, horizon, gamma, seed)
+    )
+    summary = run_scenario(sc, args.controller, horizon, gamma, seed, out)
+    clearance = summary["min_clearance_m"]
+    clearance_text = "n/a" if clearance is None else f"{clearance:.3f} m"
+    print(
+        f"{sc.name} {args.controller} N={horizon} gamma={gamma:g}: {summary['outcome']}, "
+        f"min clearance {clearance_text}, solve median {summary['solve_ms_median']:.2f} ms -> {out}"
+    )
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="husky-sim", description="Husky A200 NMPC-CLF/CBF validation suite")
     sub = parser.add_subparsers(dest="command", required=True)
+    scenarios = sub.add_parser("scenarios", help="list the shipped scenarios")
+    scenarios.set_defaults(func=_cmd_scenarios)
+    run = sub.add_parser("run", help="run one scenario in PyBullet; writes summary.json and log.csv")
+    run.add_argument("scenario", help="a scenario YAML path or the name of a shipped scenario")
+    run.add_argument("--controller", choices=SAFETY_CONSTRAINTS, default="relax-cbf")
+    run.add_argument("--horizon", type=_positive_int, default=None, help="prediction steps N >= 1")
+    run.add_argument("--gamma", type=_unit_float, default=None, help="CBF decay rate in [0, 1]")
+    run.add_argument("--seed", type=int, default=None, help="seed of noise and random obstacles")
+    run.add_argument("--out", default=None, help="output directory (default results/<run>)")
+    run.set_defaults(func=_cmd_run)
     bench = sub.add_parser("bench", help="NMPC solve-time benchmark: ours vs a casadi.Opti baseline")
     bench.add_argument("--json", action="store_true", help="print JSON records instead of a table")
     bench.add_argument(
@@ -97,7 +142,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = parser.parse_args(argv)
     try:
         return args.func(args)
-    except (UsageError, ConfigError, ValueError) as exc:
+    except (UsageError, ConfigError, ScenarioError, ValueError) as exc:
         print(f"husky-sim: error: {exc}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
