@@ -254,28 +254,19 @@ class Scenario(_Strict):
     def controller_config(
         self, safety: SafetyConstraint, horizon: int | None = None, gamma: float | None = None
     ) -> NMPCConfig:
-        c = self.controller
+        # ControllerSpec's fields are NMPCConfig's fields by name
+        fields = self.controller.model_dump()
+        fields.update(horizon=horizon or fields["horizon"], gamma=fields["gamma"] if gamma is None else gamma)
         return NMPCConfig(
+            **fields,
             tau_s=self.tau_s,
-            horizon=horizon or c.horizon,
-            gamma=c.gamma if gamma is None else gamma,
-            alpha=c.alpha,
-            state_weight=c.state_weight,
-            input_weight=c.input_weight,
-            clf_weight=c.clf_weight,
-            clf_slack_weight=c.clf_slack_weight,
-            decay_slack_weight=c.decay_slack_weight,
-            v_min_mps=c.v_min_mps,
-            v_max_mps=c.v_max_mps,
-            omega_max_radps=c.omega_max_radps,
             safety=safety,
             robot_radius_m=self.robot.radius(),
             obstacle_slots=max(len(self.obstacle_specs()), 1),
-            obstacle_prediction=c.obstacle_prediction,
         )
 
     def episode_config(self, seed: int | None = None) -> EpisodeConfig:
-        s, f, n = self.success, self.friction, self.sensing
+        f = self.friction
         try:
             drive = DriveConfig(**self.drive)
         except TypeError as exc:
@@ -291,16 +282,8 @@ class Scenario(_Strict):
             wheel_friction=WheelFriction(
                 longitudinal=f.wheel_longitudinal, lateral_scale=f.wheel_lateral_scale
             ),
-            sensing=SensingConfig(n.pose_xy_std_m, n.pose_yaw_std_rad, n.obstacle_xy_std_m, n.latency_steps),
-            outcomes=Outcomes(
-                goal_position_m=s.goal_position_m,
-                goal_heading_rad=s.goal_heading_rad,
-                goal_hold_s=s.goal_hold_s,
-                tracking_settle_s=s.tracking_settle_s,
-                tracking_rmse_m=s.tracking_rmse_m,
-                stuck_window_steps=s.stuck_window_steps,
-                stuck_speed_mps=s.stuck_speed_mps,
-            ),
+            sensing=SensingConfig(**self.sensing.model_dump()),  # same field names
+            outcomes=Outcomes(**self.success.model_dump()),  # same field names
             payload_kg=self.robot.payload_kg,
             seed=self.seed if seed is None else seed,
         )
