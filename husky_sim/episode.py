@@ -28,6 +28,7 @@ from husky_sim.drive import DriveConfig, SkidSteerDrive
 from husky_sim.metrics import EpisodeMetrics, summarise
 from husky_sim.robot import HuskyRobot, WheelFriction
 from husky_sim.sensing import SensingConfig, Sensor
+from husky_sim.trace import TRACE_HZ, EpisodeTrace
 from husky_sim.world import World, WorldConfig
 
 #: One row per control step at time t_s: the true pose, body velocity and wheel speeds at t_s,
@@ -119,6 +120,7 @@ class EpisodeResult:
     metrics: EpisodeMetrics
     rows: list[dict[str, object]]
     predicted_states: list[np.ndarray]  # per control step, (N+1, 3)
+    trace: EpisodeTrace  # poses and obstacles at TRACE_HZ, plans, reference path (for rendering)
 
 
 class _Log:
@@ -207,6 +209,7 @@ def _run(
     applied_history: list[np.ndarray] = [drive.applied]
     command = np.zeros(2)
     outcome, in_tolerance, reached_at = None, 0, None
+    recorder = _TraceRecorder(robot, world, max(round(config.world.physics_hz / TRACE_HZ), 1))
     for k in range(steps):
         t = k * config.tau_s
         pose, body, wheels = robot.pose(), robot.body_velocity(), robot.wheel_speeds()
@@ -221,6 +224,7 @@ def _run(
             applied_history.append(applied)
             robot.command_wheels(*drive.wheel_speeds(applied), config.drive.wheel_torque_limit_nm)
             world.step()
+            recorder.sample()
             if world.obstacle_ids or world.wall_ids:
                 xy = robot.pose()[:2]
                 distances = np.concatenate(
@@ -305,7 +309,67 @@ def _run(
         final_pose=robot.pose(),
         sim_time_s=world.time_s,
     )
-    return EpisodeResult(metrics, rows, plans)
+    trace = recorder.finish(rows, plans, reference, config, robot_radius_m, robot.geometry.footprint_radius_m)
+    return EpisodeResult(metrics, rows, plans, trace)
+
+
+class _TraceRecorder:
+    """Samples the true base pose and obstacle centres every `every` physics steps (reads only)."""
+
+    def __init__(self, robot: HuskyRobot, world: World, every: int) -> None:
+        self._robot, self._world, self._every = robot, world, every
+        self._count = 0
+        self._t: list[float] = []
+        self._pos: list[tuple[float, ...]] = []
+        self._orn: list[tuple[float, ...]] = []
+        self._obs: list[np.ndarray] = []
+        self._take()
+
+    def _take(self) -> None:
+        pos, orn = self._robot.base_com_pose()
+        self._t.append(self._world.time_s)
+        self._pos.append(tuple(pos))
+        self._orn.append(tuple(orn))
+        self._obs.append(self._world.obstacle_centres().copy())
+
+    def sample(self) -> None:
+        self._count += 1
+        if self._count % self._every == 0:
+            self._take()
+
+    def finish(
+        self,
+        rows: list[dict[str, object]],
+        plans: list[np.ndarray],
+        reference: Reference,
+        config: EpisodeConfig,
+        robot_radius_m: float | None,
+        footprint_radius_m: float,
+    ) -> EpisodeTrace:
+        specs = config.world.obstacles
+        t_end = max(self._t[-1], config.duration_s)
+        ref_t = np.arange(0.0, t_end + 1e-9, min(config.tau_s, 0.05))
+        goal = (
+            np.array([reference.x_m, reference.y_m, reference.theta_rad])
+            if isinstance(reference, SetPoint)
+            else np.full(3, np.nan)
+        )
+        arena = config.world.arena_half_size_m
+        return EpisodeTrace(
+            sample_t_s=np.array(self._t),
+            base_position_m=np.array(self._pos),
+            base_orientation_xyzw=np.array(self._orn),
+            obstacle_xy_m=np.array(self._obs).reshape(len(self._t), len(specs), 2),
+            obstacle_radius_m=np.array([o.radius_m for o in specs]),
+            obstacle_height_m=np.array([o.height_m for o in specs]),
+            control_t_s=np.array([float(r["t_s"]) for r in rows]),
+            predicted_states=np.array(plans) if plans else np.zeros((0, 1, 3)),
+            reference_path=np.array([reference.state_at(t) for t in ref_t]),
+            goal=goal,
+            robot_radius_m=float("nan") if robot_radius_m is None else float(robot_radius_m),
+            footprint_radius_m=float(footprint_radius_m),
+            arena_half_size_m=float("nan") if arena is None else float(arena),
+        )
 
 
 def compare_logs(a: Sequence[dict[str, object]], b: Sequence[dict[str, object]]) -> list[str]:

@@ -99,6 +99,10 @@ class HuskyRobot:
         yaw = p.getEulerFromQuaternion(orn)[2]
         return np.array([pos[0], pos[1], yaw])
 
+    def base_com_pose(self) -> tuple[tuple[float, ...], tuple[float, ...]]:
+        """PyBullet's base frame (centre of mass): position (m) and quaternion (x, y, z, w)."""
+        return p.getBasePositionAndOrientation(self.body, physicsClientId=self.client)
+
     def body_velocity(self) -> np.ndarray:
         """Achieved [v (m/s) along the heading, yaw rate (rad/s)]."""
         lin, ang = p.getBaseVelocity(self.body, physicsClientId=self.client)

@@ -46,5 +46,6 @@ def run_scenario(
     }
     if out_dir is not None:
         out_dir.mkdir(parents=True, exist_ok=True)
+        result.trace.save(out_dir / "trace.npz")
         (out_dir / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
     return summary
