@@ -42,6 +42,9 @@ def run_scenario(
         "seed": episode_config.seed,
         "tau_s": nmpc_config.tau_s,
         "prediction_time_s": nmpc_config.horizon * nmpc_config.tau_s,
+        "v_min_mps": nmpc_config.v_min_mps,
+        "v_max_mps": nmpc_config.v_max_mps,
+        "omega_max_radps": nmpc_config.omega_max_radps,
         **result.metrics.as_dict(),
     }
     if out_dir is not None:
