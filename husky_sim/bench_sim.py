@@ -14,6 +14,7 @@ from controllers import NMPCConfig, NMPCController, SetPoint
 from husky_sim.collision import ClearanceMonitor
 from husky_sim.drive import DriveConfig, SkidSteerDrive
 from husky_sim.episode import EpisodeConfig, Outcomes, run_episode
+from husky_sim.replay import simulate_commands
 from husky_sim.robot import HuskyRobot
 from husky_sim.scenarios_kinematic import CLUTTERED_POINT_STABILISATION
 from husky_sim.world import ObstacleSpec, World, WorldConfig, obstacle_specs_from
@@ -60,20 +61,15 @@ def drive_open_loop(
 ) -> tuple[np.ndarray, np.ndarray]:
     """Hold a body command [v, omega] on flat ground; return the mean achieved [v, yaw rate] over
     the second half of the run and the applied (limited) command of every physics step."""
-    with World(WorldConfig(physics_hz=physics_hz, ground_friction=ground_friction)) as world:
-        robot = HuskyRobot(world.client, (0.0, 0.0, 0.0))
-        cfg = DriveConfig()
-        drive = SkidSteerDrive(cfg, robot.geometry.wheel_radius_m, robot.geometry.track_width_m)
-        achieved, applied = [], []
-        steps = int(seconds * physics_hz)
-        for k in range(steps):
-            a = drive.limit(np.array(command), world.dt_s)
-            applied.append(a)
-            robot.command_wheels(*drive.wheel_speeds(a), cfg.wheel_torque_limit_nm)
-            world.step()
-            if k >= steps // 2:
-                achieved.append(robot.body_velocity())
-        return np.mean(achieved, axis=0), np.array(applied)
+    track = simulate_commands(
+        np.zeros(1),
+        np.array([command], dtype=float),
+        seconds,
+        (0.0, 0.0, 0.0),
+        world=WorldConfig(physics_hz=physics_hz, ground_friction=ground_friction),
+    )
+    steps = len(track.applied)
+    return np.mean(track.body_velocity[steps // 2 + 1 :], axis=0), track.applied
 
 
 DRIVE_TABLE_COMMANDS = ((0.5, 0.0), (1.0, 0.0), (0.0, 0.5), (0.0, 1.0), (0.5, 0.5), (0.3, -0.3))

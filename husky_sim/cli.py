@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 from collections.abc import Sequence
 
@@ -12,6 +13,13 @@ from husky_sim.scenario import ScenarioError
 
 class UsageError(Exception):
     """A user mistake: printed as one line, exit code 2."""
+
+
+class _OneLineErrorParser(argparse.ArgumentParser):
+    """argparse, but a usage mistake prints one line (no usage block) and exits 2."""
+
+    def error(self, message: str) -> None:  # type: ignore[override]
+        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
 
 
 def _positive_int(text: str) -> int:
@@ -78,10 +86,12 @@ def _cmd_scenarios(args: argparse.Namespace) -> int:
 def _cmd_run(args: argparse.Namespace) -> int:
     from pathlib import Path
 
+    from husky_sim.rendering import options_from_args, record_in_summary, render_run
     from husky_sim.run import run_dir_name, run_scenario
     from husky_sim.scenario import load_scenario
 
     sc = load_scenario(args.scenario)
+    video = options_from_args(args) if args.video else None  # bad render options fail before the run
     horizon = args.horizon or sc.controller.horizon
     gamma = sc.controller.gamma if args.gamma is None else args.gamma
     seed = sc.seed if args.seed is None else args.seed
@@ -97,11 +107,145 @@ def _cmd_run(args: argparse.Namespace) -> int:
         f"{sc.name} {args.controller} N={horizon} gamma={gamma:g}: {summary['outcome']}, "
         f"min clearance {clearance_text}, solve median {summary['solve_ms_median']:.2f} ms -> {out}"
     )
+    if video is not None:  # rendered afterwards from the written trace: it cannot touch the physics
+        result = render_run(out, video)
+        record_in_summary(out, result)
+        print(result.report())
+    return 0
+
+
+def _cmd_render(args: argparse.Namespace) -> int:
+    from husky_sim.rendering import options_from_args, render_run
+
+    result = render_run(args.run_dir, options_from_args(args), args.out)
+    print(result.report())
+    return 0
+
+
+def _cmd_suite(args: argparse.Namespace) -> int:
+    from pathlib import Path
+
+    from husky_sim.scenario import load_scenario, shipped_scenarios
+    from husky_sim.suite import markdown_table, matrix, run_suite, write_figures
+
+    names = args.scenarios or [p.stem for p in shipped_scenarios()]
+    for name in names:
+        load_scenario(name)  # bad input fails here, in one line, before any worker starts
+    cells = matrix(names, args.controllers, args.horizons or [None], args.gammas or [None], args.seed)
+    out = Path(args.out)
+    rows = run_suite(cells, jobs=args.jobs, out_dir=out, progress=not args.quiet)
+    figures = write_figures(rows, out, per_run=args.plots)
+    print(markdown_table(rows), end="")
+    print(f"{len(figures)} figures (PNG and SVG) -> {out / 'plots'}")
+    errors = [r for r in rows if r["outcome"] == "error"]
+    for r in errors:
+        print(f"error in {r['run_dir']}: {r['error']}", file=sys.stderr)
+    print(f"{len(rows)} runs -> {out / 'results.csv'}, {out / 'results.md'}")
+    return 1 if errors else 0
+
+
+def _cmd_check(args: argparse.Namespace) -> int:
+    from pathlib import Path
+
+    from husky_sim.check import CheckOptions, default_out_dir, run_check
+    from husky_sim.scenario import load_scenario
+
+    # integers are range-checked by CheckOptions, so "--samples 0" is one line, exit 2
+    options = CheckOptions(
+        controller=args.controller,
+        horizon=args.horizon,
+        samples=args.samples,
+        seed=args.seed,
+        jobs=args.jobs,
+        backend=args.backend,
+        scheduler=args.scheduler,
+        timing_solves=args.timing_solves,
+        min_pass_rate=args.min_pass_rate,
+    )
+    sc = load_scenario(args.scenario)
+    horizon = args.horizon or sc.controller.horizon
+    seed = sc.seed if args.seed is None else args.seed
+    out = Path(args.out or default_out_dir(sc.name, args.controller, horizon, args.samples, seed))
+    report = run_check(sc, options, out, log=print)
+    s = report.stats
+    print(f"sweep: {s['passed']}/{s['samples']} passed ({s['pass_rate']:.0%}), outcomes {s['outcomes']}")
+    print(f"{report.verdict}: {report.reason}")
+    print(f"-> {out / 'check.md'}, {out / 'check.json'}")
+    return 0 if report.verdict == "PASS" else 1
+
+
+def _cmd_plot(args: argparse.Namespace) -> int:
+    from pathlib import Path
+
+    from husky_sim.plots import RUN_FIGURES, plot_runs, plot_tuning_maps
+
+    if not args.run_dirs and not args.results:
+        raise UsageError("plot: give one or more run directories, or --results results.csv")
+    if args.scenario and not args.results:
+        raise UsageError("plot: --scenario only applies to --results")
+    try:
+        if args.run_dirs:
+            plotted = plot_runs(args.run_dirs, args.out)
+            for run_dir, target in plotted.runs.items():
+                print(f"{run_dir}: {len(RUN_FIGURES)} figures (PNG and SVG) -> {target}")
+            if plotted.comparison is not None:
+                print(f"comparison of {len(args.run_dirs)} runs -> {plotted.comparison[0]}")
+        if args.results:
+            out = Path(args.out) if args.out else Path(args.results).parent / "plots"
+            maps = plot_tuning_maps(args.results, out, args.scenario)
+            print(f"{len(maps)} tuning maps (PNG and SVG) -> {out}")
+    except OSError as exc:
+        raise UsageError(f"plot: cannot write figures ({exc})") from None
+    return 0
+
+
+def _cmd_paper(args: argparse.Namespace) -> int:
+    from pathlib import Path
+
+    from husky_sim.claims import run_paper_report
+
+    out = Path(args.out)
+    results = run_paper_report(out, jobs=args.jobs, progress=not args.quiet)
+    for r in results:
+        print(f"{r.kinematic.verdict:>15s} | {r.physics.verdict:>15s} | {r.claim}")
+    print(f"(kinematic | PyBullet) -> {out / 'claims.md'}")
+    return 0
+
+
+def _positive_float(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number > 0, got {text!r}") from None
+    if not (value > 0 and math.isfinite(value)):
+        raise argparse.ArgumentTypeError(f"expected a finite number > 0, got {value}")
+    return value
+
+
+def _cmd_replay(args: argparse.Namespace) -> int:
+    from pathlib import Path
+
+    from husky_sim.replay import run_replay
+
+    bag = Path(args.bag)
+    out = Path(args.out) if args.out else Path("results") / f"replay__{bag.stem or 'bag'}"
+    lines = run_replay(
+        bag,
+        out,
+        cmd_topic=args.cmd_topic,
+        odom_topic=args.odom_topic,
+        multiplier=args.wheel_separation_multiplier,
+        ground_friction=args.ground_friction,
+        do_fit=args.fit,
+    )
+    print("\n".join(lines))
     return 0
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="husky-sim", description="Husky A200 NMPC-CLF/CBF validation suite")
+    from husky_sim.rendering import add_render_arguments
+
+    parser = _OneLineErrorParser(prog="husky-sim", description="Husky A200 NMPC-CLF/CBF validation suite")
     sub = parser.add_subparsers(dest="command", required=True)
     scenarios = sub.add_parser("scenarios", help="list the shipped scenarios")
     scenarios.set_defaults(func=_cmd_scenarios)
@@ -112,7 +256,32 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--gamma", type=_unit_float, default=None, help="CBF decay rate in [0, 1]")
     run.add_argument("--seed", type=int, default=None, help="seed of noise and random obstacles")
     run.add_argument("--out", default=None, help="output directory (default results/<run>)")
+    run.add_argument("--video", action="store_true", help="then render OUT/video_CAMERA.mp4 from its trace")
+    add_render_arguments(run)
     run.set_defaults(func=_cmd_run)
+    render = sub.add_parser("render", help="render a recorded run directory to an MP4 (no re-solve)")
+    render.add_argument("run_dir", help="a directory written by `husky-sim run` (needs its trace.npz)")
+    render.add_argument("--out", default=None, help="video file, .mp4 (default RUN_DIR/video_CAMERA.mp4)")
+    add_render_arguments(render)
+    render.set_defaults(func=_cmd_render)
+    suite = sub.add_parser("suite", help="run a scenario x controller x horizon x gamma matrix in parallel")
+    suite.add_argument("--scenarios", nargs="+", default=None, help="names or paths (default: all shipped)")
+    suite.add_argument(
+        "--controllers", nargs="+", choices=SAFETY_CONSTRAINTS, default=["bt", "cbf", "relax-cbf"]
+    )
+    suite.add_argument("--horizons", nargs="+", type=_positive_int, default=None, help="default: file's N")
+    suite.add_argument("--gammas", nargs="+", type=_unit_float, default=None, help="default: file's gamma")
+    suite.add_argument("--seed", type=int, default=None, help="seed for every run (default: the file's)")
+    suite.add_argument("--jobs", type=_positive_int, default=2, help="worker processes (default 2)")
+    suite.add_argument("--out", default="results/suite", help="output directory (default results/suite)")
+    suite.add_argument("--quiet", action="store_true", help="no progress bar")
+    suite.add_argument("--plots", action="store_true", help="also every run's own figures")
+    suite.set_defaults(func=_cmd_suite)
+    paper = sub.add_parser("paper", help="check the paper's claims; writes claims.md")
+    paper.add_argument("--out", default="results/paper", help="output directory (default results/paper)")
+    paper.add_argument("--jobs", type=_positive_int, default=2, help="worker processes (default 2)")
+    paper.add_argument("--quiet", action="store_true", help="no progress bar")
+    paper.set_defaults(func=_cmd_paper)
     bench = sub.add_parser("bench", help="NMPC solve-time benchmark: ours vs a casadi.Opti baseline")
     bench.add_argument("--json", action="store_true", help="print JSON records instead of a table")
     bench.add_argument(
@@ -134,6 +303,48 @@ def build_parser() -> argparse.ArgumentParser:
         "--drive-table", action="store_true", help="also print achieved vs commanded v and omega"
     )
     bench_sim.set_defaults(func=_cmd_bench_sim)
+    check = sub.add_parser("check", help="sim-to-real checks before a Husky trial: audit + robustness sweep")
+    check.add_argument("scenario", help="a scenario YAML path or the name of a shipped scenario")
+    check.add_argument("--controller", choices=SAFETY_CONSTRAINTS, default="relax-cbf")
+    check.add_argument("--horizon", type=int, default=None, help="prediction steps N (default: the file's)")
+    check.add_argument("--samples", type=int, default=32, help="perturbed runs K >= 1 (default 32)")
+    check.add_argument("--jobs", type=int, default=None, help="worker processes (default: all cores)")
+    check.add_argument("--seed", type=int, default=None, help="perturbation seed (default: the file's)")
+    check.add_argument("--backend", choices=("local", "dask"), default="local", help="where samples run")
+    check.add_argument("--scheduler", default=None, help="Dask scheduler address (default: a LocalCluster)")
+    check.add_argument("--timing-solves", type=int, default=100, help="NMPC solves timed (default 100)")
+    check.add_argument(
+        "--min-pass-rate", type=_unit_float, default=0.95, help="pass rate needed in [0, 1] (default 0.95)"
+    )
+    check.add_argument("--out", default=None, help="output directory (default results/check__...)")
+    check.set_defaults(func=_cmd_check)
+    plot = sub.add_parser("plot", help="figures of runs (PNG and SVG), or tuning maps of a suite")
+    plot.add_argument("run_dirs", nargs="*", metavar="RUN_DIR", help="run directories (husky-sim run --out)")
+    plot.add_argument("--results", default=None, help="a suite's results.csv: gamma x N tuning maps")
+    plot.add_argument("--scenario", default=None, help="with --results: only this scenario's maps")
+    plot.add_argument(
+        "--out", default=None, help="output directory (default RUN_DIR/plots, or beside results.csv)"
+    )
+    plot.set_defaults(func=_cmd_plot)
+    replay = sub.add_parser(
+        "replay", help="drive the simulated Husky with a recording's commands; measure the divergence"
+    )
+    replay.add_argument("bag", help="a ROS 1 .bag, a ROS 2 bag directory, or a CSV t,v,omega,x,y,theta")
+    replay.add_argument("--cmd-topic", default="/cmd_vel", help="Twist or TwistStamped (default /cmd_vel)")
+    replay.add_argument(
+        "--odom-topic", default="/odometry/filtered", help="nav_msgs/Odometry (default /odometry/filtered)"
+    )
+    replay.add_argument("--out", default=None, help="output directory (default results/replay__<bag>)")
+    replay.add_argument(
+        "--fit", action="store_true", help="fit the multiplier and ground friction not given below to the ATE"
+    )
+    replay.add_argument(
+        "--wheel-separation-multiplier", type=_positive_float, default=None, metavar="M", help="default 1.875"
+    )
+    replay.add_argument(
+        "--ground-friction", type=_positive_float, default=None, metavar="MU", help="default 1.0"
+    )
+    replay.set_defaults(func=_cmd_replay)
     return parser
 
 

@@ -80,6 +80,8 @@ class Outcomes:
     tracking_rmse_m: float = 0.3  # tracking converged when RMSE <= this
     stuck_window_steps: int = 10  # mean |v| over this many control steps ...
     stuck_speed_mps: float = 0.05  # ... below this, away from the reference -> stuck
+    # ... and mean |yaw rate| below this: a skid-steer robot turning in place is not stuck
+    stuck_yaw_rate_radps: float = 0.05
     stuck_grace_s: float = 2.0  # no stuck verdict before this time
     stop_on_collision: bool = True
     stop_early: bool = True  # end the episode once reached or stuck (else run the full duration)
@@ -282,12 +284,14 @@ def _run(
                 if outcomes.stop_early:
                     break
         away = pos_err > (outcomes.goal_position_m if is_setpoint else outcomes.tracking_rmse_m)
-        window = [abs(r["v_body_mps"]) for r in rows[-outcomes.stuck_window_steps :]]
+        recent = rows[-outcomes.stuck_window_steps :]
+        window = np.abs([(r["v_body_mps"], r["omega_body_radps"]) for r in recent])
         if (
             away
             and t_next >= outcomes.stuck_grace_s
             and len(window) == outcomes.stuck_window_steps
-            and float(np.mean(window)) < outcomes.stuck_speed_mps
+            and float(np.mean(window[:, 0])) < outcomes.stuck_speed_mps
+            and float(np.mean(window[:, 1])) < outcomes.stuck_yaw_rate_radps
             and outcome is None
         ):
             outcome = "stuck"

@@ -188,6 +188,7 @@ class SensingSpec(_Strict):
     pose_yaw_std_rad: NonNegative = 0.0
     obstacle_xy_std_m: NonNegative = 0.0
     latency_steps: Annotated[int, Field(ge=0, le=20)] = 0
+    obstacle_velocity_scale: NonNegative = 1.0  # reported / true obstacle velocity
 
 
 class SuccessSpec(_Strict):
@@ -198,6 +199,7 @@ class SuccessSpec(_Strict):
     tracking_settle_s: NonNegative = 10.0
     stuck_window_steps: Annotated[int, Field(ge=1)] = 10
     stuck_speed_mps: Positive = 0.05
+    stuck_yaw_rate_radps: Positive = 0.05
 
 
 class Scenario(_Strict):

@@ -1,5 +1,6 @@
 """What the controller is told: the Husky's pose and the obstacle circles, from the simulator,
-with optional seeded Gaussian noise and a latency of k control steps."""
+with optional seeded Gaussian noise, a latency of k control steps, and a scale error on the
+obstacles' velocities (an estimator that over- or under-reads how fast they move)."""
 
 from __future__ import annotations
 
@@ -15,15 +16,17 @@ from controllers import Obstacle
 
 @dataclass(frozen=True)
 class SensingConfig:
-    """Noise standard deviations and latency (control steps)."""
+    """Noise standard deviations, latency (control steps) and the factor (dimensionless) by which
+    the reported obstacle velocities differ from the true ones (1: exact, 0: reported static)."""
 
     pose_xy_std_m: float = 0.0
     pose_yaw_std_rad: float = 0.0
     obstacle_xy_std_m: float = 0.0
     latency_steps: int = 0
+    obstacle_velocity_scale: float = 1.0
 
     def __post_init__(self) -> None:
-        for name in ("pose_xy_std_m", "pose_yaw_std_rad", "obstacle_xy_std_m"):
+        for name in ("pose_xy_std_m", "pose_yaw_std_rad", "obstacle_xy_std_m", "obstacle_velocity_scale"):
             value = getattr(self, name)
             if not (value >= 0 and math.isfinite(value)):
                 raise ValueError(f"sensing.{name}: must be >= 0, got {value}")
@@ -54,8 +57,15 @@ class Sensor:
             cfg.pose_yaw_std_rad,
         ]
         offsets = self._rng.normal(0.0, cfg.obstacle_xy_std_m, (len(obstacles), 2)) if obstacles else []
+        scale = cfg.obstacle_velocity_scale
         noisy_obstacles = [
-            replace(o, x_m=o.x_m + float(d[0]), y_m=o.y_m + float(d[1]))
+            replace(
+                o,
+                x_m=o.x_m + float(d[0]),
+                y_m=o.y_m + float(d[1]),
+                vx_mps=o.vx_mps * scale,
+                vy_mps=o.vy_mps * scale,
+            )
             for o, d in zip(obstacles, offsets, strict=True)
         ]
         self._queue.append(Measurement(noisy_pose, noisy_obstacles))

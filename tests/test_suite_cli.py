@@ -1,0 +1,146 @@
+"""`husky-sim suite` and the claims report's machinery: matrix, parallel runs, result files,
+figures, and the verdict rules (real PyBullet and IPOPT runs, shortened scenarios)."""
+
+from __future__ import annotations
+
+import csv
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from husky_sim.claims import (
+    NOT_REPRODUCED,
+    PARTLY,
+    REPRODUCED,
+    Runs,
+    _grade,
+    _grade_primary,
+    deviation_onset_s,
+    input_roughness,
+    required_cells,
+    stopped_time_s,
+)
+from husky_sim.cli import main
+from husky_sim.scenario import resolve
+from husky_sim.suite import Cell, markdown_table, matrix, run_suite, standard_matrix
+
+
+def _short_scenario(tmp_path: Path, name: str, duration_s: float) -> Path:
+    data = yaml.safe_load(resolve(name).read_text())
+    data["duration_s"] = duration_s
+    path = tmp_path / f"{name}.yaml"
+    path.write_text(yaml.safe_dump(data))
+    return path
+
+
+def test_matrix_order_and_bt_has_one_gamma() -> None:
+    cells = matrix(["a"], ["bt", "cbf"], [5, 12], [0.1, 0.2])
+    assert [c.label() for c in cells] == [
+        "a__bt__N5__g0.1",
+        "a__bt__N12__g0.1",
+        "a__cbf__N5__g0.1",
+        "a__cbf__N12__g0.1",
+        "a__cbf__N5__g0.2",
+        "a__cbf__N12__g0.2",
+    ]
+
+
+def test_standard_matrix_has_every_controller_and_horizon_and_the_paper_gammas() -> None:
+    cells = standard_matrix(["paper_point_stabilisation", "narrow_gap"])
+    assert len(cells) == 2 * 3 * 3 + 6
+    assert Cell("paper_point_stabilisation", "relax-cbf", 5, 0.05) in cells
+    assert all(c.gamma is None for c in cells if c.scenario == "narrow_gap")
+
+
+def test_suite_runs_in_parallel_and_writes_results_and_figures(tmp_path: Path) -> None:
+    scenario = _short_scenario(tmp_path, "husky_point_stabilisation", 4.0)
+    out = tmp_path / "suite"
+    code = main(
+        ["suite", "--scenarios", str(scenario), "--controllers", "bt", "cbf", "--horizons", "5",
+         "--jobs", "2", "--quiet", "--out", str(out)]
+    )
+    assert code == 0
+    with (out / "results.csv").open() as f:
+        rows = list(csv.DictReader(f))
+    assert [(r["controller"], r["horizon"]) for r in rows] == [("bt", "5"), ("cbf", "5")]
+    for r in rows:
+        run_dir = out / r["run_dir"]
+        assert (run_dir / "log.csv").is_file() and (run_dir / "trace.npz").is_file()
+        assert float(r["sim_time_s"]) == pytest.approx(4.0, abs=0.3) or r["outcome"] in {"stuck", "collided"}
+    assert "| husky_point_stabilisation | bt | 5 |" in (out / "results.md").read_text()
+    assert (out / "plots" / "comparison_husky_point_stabilisation.png").stat().st_size > 10_000
+
+
+def test_parallel_and_serial_suites_agree(tmp_path: Path) -> None:
+    scenario = str(_short_scenario(tmp_path, "head_on_moving_obstacle", 3.0))
+    cells = matrix([scenario], ["cbf", "relax-cbf"], [5])
+    serial = run_suite(cells, jobs=1, progress=False)
+    parallel = run_suite(cells, jobs=2, progress=False)
+    for a, b in zip(serial, parallel, strict=True):
+        for key in ("outcome", "min_clearance_m", "final_position_error_m", "safety_active_steps"):
+            assert a[key] == b[key], key
+
+
+def test_a_crashing_cell_is_reported_not_raised() -> None:
+    rows = run_suite([Cell("no_such_scenario", "bt", 5)], jobs=1, progress=False)
+    assert rows[0]["outcome"] == "error" and "no_such_scenario" in rows[0]["error"]
+
+
+def test_markdown_table_formats_missing_and_float_values() -> None:
+    text = markdown_table([{"scenario": "s", "horizon": 5, "min_clearance_m": 0.12345, "outcome": None}],
+                          ("scenario", "horizon", "min_clearance_m", "outcome"))
+    assert text.splitlines()[2] == "| s | 5 | 0.123 | - |"
+
+
+def test_cli_errors_are_one_line_with_exit_code_2(tmp_path: Path) -> None:
+    husky_sim = Path(sys.executable).with_name("husky-sim")
+    for args in (["suite", "--scenarios", "no_such_scenario"], ["suite", "--horizons", "0"], ["run", "nope"]):
+        proc = subprocess.run([str(husky_sim), *args], capture_output=True, text=True, cwd=tmp_path)
+        assert proc.returncode == 2, args
+        assert len(proc.stderr.strip().splitlines()) == 1, proc.stderr
+        assert "Traceback" not in proc.stderr
+
+
+def test_grade() -> None:
+    assert _grade([True, True]) == REPRODUCED
+    assert _grade([True, False]) == PARTLY
+    assert _grade([False, False]) == NOT_REPRODUCED
+    assert _grade_primary([True], [True]) == REPRODUCED
+    assert _grade_primary([True], [False]) == PARTLY
+    assert _grade_primary([False], [True]) == NOT_REPRODUCED  # the contrast alone proves nothing
+
+
+def _series(err: np.ndarray, v: np.ndarray, w: np.ndarray, dt: float = 0.1) -> dict[str, np.ndarray]:
+    t = dt * np.arange(len(err))
+    return {"t_s": t, "x_m": err, "y_m": 0 * t, "ref_x_m": 0 * t, "ref_y_m": 0 * t,
+            "v_cmd_mps": v, "omega_cmd_radps": w}
+
+
+def test_deviation_onset_smoothness_and_stopped_time() -> None:
+    err = np.array([0.5, 0.3, 0.05, 0.08, 0.15, 0.25, 0.4, 0.1])
+    s = _series(err, np.array([1, 1, 1, 0, 0, 0, 1, 1.0]), np.array([0, 0.1, 0, 0.1, 0, 0, 0, 0.0]))
+    assert deviation_onset_s(s) == pytest.approx(0.5)  # first > 0.2 m after first < 0.1 m
+    assert deviation_onset_s(_series(err[:2], np.ones(2), np.zeros(2))) is None  # never near
+    rough_v, rough_w = input_roughness(s)
+    assert rough_v == pytest.approx(np.sqrt(2 * 10.0**2 / 7))
+    assert rough_w == pytest.approx(np.sqrt(4 * 1.0**2 / 7))
+    assert stopped_time_s(s) == pytest.approx(0.1)  # only step 5 is stopped and > 0.2 m off
+
+
+def test_claims_read_physics_series_from_the_run_log(tmp_path: Path) -> None:
+    scenario = str(_short_scenario(tmp_path, "husky_circle_tracking", 2.0))
+    cells = [Cell(scenario, "cbf", 5)]
+    rows = run_suite(cells, jobs=1, out_dir=tmp_path / "out", progress=False)
+    series = Runs(cells, rows, tmp_path / "out").series(rows[0])
+    assert len(series["t_s"]) == rows[0]["steps"] and series["x_m"][0] == pytest.approx(2.5, abs=0.01)
+
+
+def test_required_cells_cover_every_claim_and_kinematic_runs_use_the_papers_radius() -> None:
+    cells = required_cells("kinematic")
+    assert len(cells) == len(set(cells))
+    assert all(c.robot_radius_m == 0.25 for c in cells if c.scenario.startswith("paper_"))
+    assert all(c.robot_radius_m is None for c in required_cells("physics"))
