@@ -223,7 +223,7 @@ def claim_limits(runs: Runs, model: str) -> Verdict:
         breaches += over_v > 1e-6 or over_w > 1e-6
     what = "applied (after the drive's limits)" if model == "physics" else "commanded"
     evidence = (
-        f"{len(rows)} runs, {what} |v| and |omega| within bounds in {len(rows) - breaches}; worst excess "
+        f"{len(rows)} runs, {what} speed and yaw rate within bounds in {len(rows) - breaches}; worst excess "
         f"{worst_v:.2e} m/s, {worst_w:.2e} rad/s"
     )
     return Verdict(REPRODUCED if breaches == 0 else NOT_REPRODUCED, evidence)

@@ -9,6 +9,7 @@ changes the physics.
 
 from __future__ import annotations
 
+import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -47,7 +48,7 @@ class EpisodeTrace:
         try:
             with np.load(path) as data:
                 fields = {k: data[k] for k in data.files}
-        except (OSError, ValueError) as exc:
+        except (OSError, ValueError, zipfile.BadZipFile) as exc:
             raise ValueError(f"{path}: not a readable episode trace ({exc})") from None
         names = [f for f in cls.__dataclass_fields__ if f != "extra"]
         missing = [n for n in names if n not in fields]
