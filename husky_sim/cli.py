@@ -22,14 +22,23 @@ class _OneLineErrorParser(argparse.ArgumentParser):
         self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
 
 
-def _positive_int(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected an integer >= 1, got {text!r}") from None
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"expected an integer >= 1, got {value}")
-    return value
+def _int_at_least(minimum: int):
+    """An argparse type: an integer >= minimum, else a one-line error."""
+
+    def parse(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected an integer >= {minimum}, got {text!r}") from None
+        if value < minimum:
+            raise argparse.ArgumentTypeError(f"expected an integer >= {minimum}, got {value}")
+        return value
+
+    return parse
+
+
+_positive_int = _int_at_least(1)
+_non_negative_int = _int_at_least(0)
 
 
 def _unit_float(text: str) -> float:
@@ -254,7 +263,7 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--controller", choices=SAFETY_CONSTRAINTS, default="relax-cbf")
     run.add_argument("--horizon", type=_positive_int, default=None, help="prediction steps N >= 1")
     run.add_argument("--gamma", type=_unit_float, default=None, help="CBF decay rate in [0, 1]")
-    run.add_argument("--seed", type=int, default=None, help="seed of noise and random obstacles")
+    run.add_argument("--seed", type=_non_negative_int, default=None, help="noise and random-field seed")
     run.add_argument("--out", default=None, help="output directory (default results/<run>)")
     run.add_argument("--video", action="store_true", help="then render OUT/video_CAMERA.mp4 from its trace")
     add_render_arguments(run)
@@ -271,7 +280,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     suite.add_argument("--horizons", nargs="+", type=_positive_int, default=None, help="default: file's N")
     suite.add_argument("--gammas", nargs="+", type=_unit_float, default=None, help="default: file's gamma")
-    suite.add_argument("--seed", type=int, default=None, help="seed for every run (default: the file's)")
+    suite.add_argument("--seed", type=_non_negative_int, default=None, help="seed (default: the file's)")
     suite.add_argument("--jobs", type=_positive_int, default=2, help="worker processes (default 2)")
     suite.add_argument("--out", default="results/suite", help="output directory (default results/suite)")
     suite.add_argument("--quiet", action="store_true", help="no progress bar")
@@ -309,7 +318,7 @@ def build_parser() -> argparse.ArgumentParser:
     check.add_argument("--horizon", type=int, default=None, help="prediction steps N (default: the file's)")
     check.add_argument("--samples", type=int, default=32, help="perturbed runs K >= 1 (default 32)")
     check.add_argument("--jobs", type=int, default=None, help="worker processes (default: all cores)")
-    check.add_argument("--seed", type=int, default=None, help="perturbation seed (default: the file's)")
+    check.add_argument("--seed", type=_non_negative_int, default=None, help="perturbation seed >= 0")
     check.add_argument("--backend", choices=("local", "dask"), default="local", help="where samples run")
     check.add_argument("--scheduler", default=None, help="Dask scheduler address (default: a LocalCluster)")
     check.add_argument("--timing-solves", type=int, default=100, help="NMPC solves timed (default 100)")

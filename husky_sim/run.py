@@ -43,6 +43,7 @@ def run_scenario(
         "horizon": nmpc_config.horizon,
         "gamma": nmpc_config.gamma,
         "seed": episode_config.seed,
+        "model": "physics",
         "tau_s": nmpc_config.tau_s,
         "prediction_time_s": nmpc_config.horizon * nmpc_config.tau_s,
         "v_min_mps": nmpc_config.v_min_mps,
@@ -120,7 +121,11 @@ def run_scenario_kinematic(
         outcome = "stuck"
     else:
         outcome = "timeout" if is_setpoint else "tracking"
-    converged = outcome == "reached" if is_setpoint else (outcome == "tracking" and rmse <= s.tracking_rmse_m)
+    converged = (
+        outcome == "reached"
+        if is_setpoint
+        else (outcome == "tracking" and rmse is not None and rmse <= s.tracking_rmse_m)
+    )
     reversals, reverse_steps = count_reversals(ep.controls[:, 0])
     return {
         "scenario": sc.name,

@@ -222,6 +222,15 @@ class Scenario(_Strict):
     success: SuccessSpec = SuccessSpec()
 
     @model_validator(mode="after")
+    def _drive_keys_known(self) -> Scenario:
+        known = set(DriveConfig.__dataclass_fields__)
+        unknown = sorted(set(self.drive) - known)
+        if unknown:
+            names = ", ".join(sorted(known))
+            raise ValueError(f"drive: unknown key(s) {', '.join(unknown)} (known: {names})")
+        return self
+
+    @model_validator(mode="after")
     def _start_and_goal_clear(self) -> Scenario:
         r_robot = self.robot.radius()
         points = [("robot.start", self.robot.start)]

@@ -22,6 +22,7 @@ from tqdm import tqdm
 #: Columns of results.md (results.csv has every summary key).
 TABLE_COLUMNS = (
     "scenario",
+    "model",
     "controller",
     "horizon",
     "gamma",
@@ -70,14 +71,15 @@ def matrix(
     gammas: Sequence[float | None] = (None,),
     seed: int | None = None,
 ) -> list[Cell]:
-    """Every combination, in a fixed order (scenario, controller, gamma, horizon)."""
-    return [
+    """Every combination, in a fixed order (scenario, controller, gamma, horizon), each once."""
+    cells = [
         Cell(s, c, n, g, seed)
         for s in scenarios
         for c in controllers
         for g in (gammas if c != "bt" and c != "none" else gammas[:1])  # bt has no gamma
         for n in horizons
     ]
+    return list(dict.fromkeys(cells))
 
 
 #: The scenario suite's horizons (the issue's N in {5, 7, 12}).
@@ -120,17 +122,23 @@ def run_cell(cell: Cell, out_dir: Path | None) -> dict[str, object]:
                 cell.scenario, cell.controller, cell.horizon, cell.gamma, cell.seed, run_dir
             )
     except Exception as exc:  # noqa: BLE001 - reported per cell, the suite goes on
-        summary = {
-            "scenario": Path(cell.scenario).stem,
-            "controller": cell.controller,
-            "horizon": cell.horizon,
-            "gamma": cell.gamma,
-            "outcome": "error",
-            "error": f"{type(exc).__name__}: {exc}",
-            "traceback": traceback.format_exc(limit=3),
-        }
+        return _error_row(cell, exc, out_dir)
     summary["run_dir"] = str(Path("runs") / cell.label()) if run_dir is not None else ""
     return summary
+
+
+def _error_row(cell: Cell, exc: BaseException, out_dir: Path | None) -> dict[str, object]:
+    return {
+        "scenario": Path(cell.scenario).stem,
+        "model": cell.model,
+        "controller": cell.controller,
+        "horizon": cell.horizon,
+        "gamma": cell.gamma,
+        "outcome": "error",
+        "error": f"{type(exc).__name__}: {exc}",
+        "traceback": traceback.format_exc(limit=3),
+        "run_dir": "" if out_dir is None or cell.model != "physics" else str(Path("runs") / cell.label()),
+    }
 
 
 def run_suite(
@@ -155,7 +163,11 @@ def run_suite(
                 futures = {pool.submit(run_cell, cell, out_dir): i for i, cell in enumerate(cells)}
                 for future in as_completed(futures):
                     i = futures[future]
-                    results[i] = _finish(cells[i], future.result(), bar, on_result)
+                    try:
+                        summary = future.result()
+                    except Exception as exc:  # noqa: BLE001 - a dead worker (crash, out of memory)
+                        summary = _error_row(cells[i], exc, out_dir)
+                    results[i] = _finish(cells[i], summary, bar, on_result)
     finally:
         bar.close()
     rows = [r for r in results if r is not None]
