@@ -18,7 +18,6 @@ Definitions used by the verdicts (the paper gives none):
 
 from __future__ import annotations
 
-import csv
 import json
 from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass
@@ -26,6 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
+from husky_sim.plots import read_log
 from husky_sim.suite import Cell, run_suite
 
 MODELS = ("kinematic", "physics")
@@ -94,9 +94,8 @@ class Runs:
         keys = ("t_s", "x_m", "y_m", "ref_x_m", "ref_y_m", "v_cmd_mps", "omega_cmd_radps")
         if "t_s" in row:  # kinematic rows carry their series
             return {k: np.asarray(row[k], dtype=float) for k in keys}
-        with (self._out_dir / str(row["run_dir"]) / "log.csv").open() as f:
-            log = list(csv.DictReader(f))
-        return {k: np.array([float(r[k]) for r in log]) for k in keys}
+        log = read_log(self._out_dir / str(row["run_dir"]) / "log.csv")
+        return {k: log[k] for k in keys}
 
 
 def succeeded(row: dict[str, object]) -> bool:

@@ -25,7 +25,7 @@ from controllers import Controller, Reference, SetPoint
 from controllers.model import wrap_angle
 from husky_sim.collision import ClearanceMonitor
 from husky_sim.drive import DriveConfig, SkidSteerDrive
-from husky_sim.metrics import EpisodeMetrics, summarise
+from husky_sim.metrics import EpisodeMetrics, is_idle, summarise
 from husky_sim.robot import HuskyRobot, WheelFriction
 from husky_sim.sensing import SensingConfig, Sensor
 from husky_sim.trace import TRACE_HZ, EpisodeTrace
@@ -285,13 +285,10 @@ def _run(
                     break
         away = pos_err > (outcomes.goal_position_m if is_setpoint else outcomes.tracking_rmse_m)
         recent = rows[-outcomes.stuck_window_steps :]
-        window = np.abs([(r["v_body_mps"], r["omega_body_radps"]) for r in recent])
         if (
             away
             and t_next >= outcomes.stuck_grace_s
-            and len(window) == outcomes.stuck_window_steps
-            and float(np.mean(window[:, 0])) < outcomes.stuck_speed_mps
-            and float(np.mean(window[:, 1])) < outcomes.stuck_yaw_rate_radps
+            and is_idle([r["v_body_mps"] for r in recent], [r["omega_body_radps"] for r in recent], outcomes)
             and outcome is None
         ):
             outcome = "stuck"
@@ -334,7 +331,7 @@ class _TraceRecorder:
         self._t.append(self._world.time_s)
         self._pos.append(tuple(pos))
         self._orn.append(tuple(orn))
-        self._obs.append(self._world.obstacle_centres().copy())
+        self._obs.append(self._world.obstacle_centres())  # a fresh array each call
 
     def sample(self) -> None:
         self._count += 1

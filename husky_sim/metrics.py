@@ -29,6 +29,22 @@ def count_reversals(v_cmd_mps: np.ndarray) -> tuple[int, int]:
     return int(np.sum(backwards[1:] & ~backwards[:-1]) + int(backwards[0])), int(np.sum(backwards))
 
 
+def tracking_rmse(errors_m: np.ndarray, t_s: np.ndarray, settle_s: float) -> float | None:
+    """RMS of the position errors (m) from settle_s (s) on; None if the run ended before it."""
+    settled = np.asarray(t_s) >= settle_s
+    return float(np.sqrt(np.mean(np.asarray(errors_m)[settled] ** 2))) if np.any(settled) else None
+
+
+def is_idle(v: np.ndarray, omega: np.ndarray, outcomes: Outcomes) -> bool:
+    """The stuck rule's motion test: a full window of `stuck_window_steps` whose mean |v| (m/s) and
+    mean |omega| (rad/s) are both below their thresholds (turning in place is not idle)."""
+    return (
+        len(v) == outcomes.stuck_window_steps
+        and float(np.mean(np.abs(v))) < outcomes.stuck_speed_mps
+        and float(np.mean(np.abs(omega))) < outcomes.stuck_yaw_rate_radps
+    )
+
+
 @dataclass(frozen=True)
 class EpisodeMetrics:
     """Headline figures of one episode (units in the names)."""
@@ -95,8 +111,7 @@ def summarise(
     rmse = None
     if not is_setpoint:
         errs = np.hypot(col["x_m"] - col["ref_x_m"], col["y_m"] - col["ref_y_m"])
-        settled = col["t_s"] >= outcomes.tracking_settle_s
-        rmse = float(np.sqrt(np.mean(errs[settled] ** 2))) if np.any(settled) else None
+        rmse = tracking_rmse(errs, col["t_s"], outcomes.tracking_settle_s)
     if outcome is None:
         outcome = "collided" if collided else ("timeout" if is_setpoint else "tracking")
     converged = (

@@ -132,7 +132,7 @@ def load_run(run_dir: Path | str) -> RunRecord:
     if not run_dir.is_dir():
         raise PlotInputError(f"{run_dir}: not a run directory")
     summary = _read_summary(run_dir / "summary.json")
-    log = _read_log(run_dir / "log.csv")
+    log = read_log(run_dir / "log.csv")
     trace_path = run_dir / "trace.npz"
     if not trace_path.is_file():
         raise PlotInputError(f"{trace_path}: missing")
@@ -158,7 +158,7 @@ def _read_summary(path: Path) -> dict[str, object]:
     return summary
 
 
-def _read_log(path: Path) -> dict[str, np.ndarray]:
+def read_log(path: Path) -> dict[str, np.ndarray]:
     try:
         with path.open(newline="") as handle:
             rows = list(csv.DictReader(handle))

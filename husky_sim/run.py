@@ -79,7 +79,7 @@ def run_scenario_kinematic(
 
     from controllers import Obstacle, SetPoint
     from husky_sim.kinematic import GoalTolerance, run_kinematic
-    from husky_sim.metrics import count_reversals
+    from husky_sim.metrics import count_reversals, is_idle, tracking_rmse
 
     sc = load_scenario(scenario) if isinstance(scenario, str) else scenario
     config = sc.controller_config(controller, horizon, gamma)
@@ -104,13 +104,10 @@ def run_scenario_kinematic(
     is_setpoint = isinstance(reference, SetPoint)
     refs = np.array([reference.state_at(t) for t in ep.times_s])
     errors = np.hypot(*(ep.states[:, :2] - refs[:, :2]).T)
-    settled = ep.times_s >= s.tracking_settle_s
-    rmse = None if is_setpoint or not np.any(settled) else float(np.sqrt(np.mean(errors[settled] ** 2)))
+    outcomes = sc.episode_config().outcomes
+    rmse = None if is_setpoint else tracking_rmse(errors, ep.times_s, s.tracking_settle_s)
     window = ep.controls[-s.stuck_window_steps :]
-    idle = len(window) == s.stuck_window_steps and (
-        float(np.mean(np.abs(window[:, 0]))) < s.stuck_speed_mps
-        and float(np.mean(np.abs(window[:, 1]))) < s.stuck_yaw_rate_radps
-    )
+    idle = is_idle(window[:, 0], window[:, 1], outcomes)
     far = errors[-1] > (s.goal_position_m if is_setpoint else s.tracking_rmse_m)
     collided = bool(obstacles) and ep.min_clearance_m < -KINEMATIC_CONTACT_TOL_M
     if collided:

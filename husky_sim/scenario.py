@@ -278,10 +278,7 @@ class Scenario(_Strict):
 
     def episode_config(self, seed: int | None = None) -> EpisodeConfig:
         f = self.friction
-        try:
-            drive = DriveConfig(**self.drive)
-        except TypeError as exc:
-            raise ScenarioError(f"drive: unknown key ({exc})") from None
+        drive = DriveConfig(**self.drive)  # keys checked by _drive_keys_known
         return EpisodeConfig(
             start=(self.robot.start.x_m, self.robot.start.y_m, self.robot.start.yaw_rad),
             tau_s=self.tau_s,

@@ -10,7 +10,7 @@ changes the physics.
 from __future__ import annotations
 
 import zipfile
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -36,11 +36,9 @@ class EpisodeTrace:
     robot_radius_m: float  # the controller's robot circle
     footprint_radius_m: float  # the URDF footprint
     arena_half_size_m: float = float("nan")  # NaN: no walls
-    extra: dict[str, np.ndarray] = field(default_factory=dict)
 
     def save(self, path: Path) -> None:
-        arrays = {k: v for k, v in self.__dict__.items() if k != "extra"}
-        np.savez_compressed(path, **{k: np.asarray(v) for k, v in arrays.items()}, **self.extra)
+        np.savez_compressed(path, **{k: np.asarray(v) for k, v in self.__dict__.items()})
 
     @classmethod
     def load(cls, path: Path) -> EpisodeTrace:
@@ -50,14 +48,12 @@ class EpisodeTrace:
                 fields = {k: data[k] for k in data.files}
         except (OSError, ValueError, zipfile.BadZipFile) as exc:
             raise ValueError(f"{path}: not a readable episode trace ({exc})") from None
-        names = [f for f in cls.__dataclass_fields__ if f != "extra"]
+        names = list(cls.__dataclass_fields__)
         missing = [n for n in names if n not in fields]
         if missing:
             raise ValueError(f"{path}: not an episode trace (missing {', '.join(missing)})")
         scalars = {"robot_radius_m", "footprint_radius_m", "arena_half_size_m"}
-        kwargs = {n: (float(fields[n]) if n in scalars else fields[n]) for n in names}
-        extra = {k: v for k, v in fields.items() if k not in names}
-        return cls(**kwargs, extra=extra)
+        return cls(**{n: (float(fields[n]) if n in scalars else fields[n]) for n in names})
 
     def pose_index(self, t_s: float) -> int:
         """Index of the last pose sample at or before t_s (clamped)."""
