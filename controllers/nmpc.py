@@ -6,7 +6,9 @@ the previous plan shifted by one step (s_h guess 1), solve, apply the first cont
 Fallback when IPOPT fails (infeasible, iteration or time limit, non-finite numbers, exception):
 the next control of the last solved plan, if that plan's remaining states are still collision-free
 against the obstacles as now predicted; otherwise a braking command v = 0, omega = 0. The result
-is marked as a fallback and the loop goes on; `solve` never raises for a solver failure.
+is marked as a fallback and the loop goes on; `solve` never raises for a solver failure. A signal
+(Ctrl-C, SIGTERM) during a solve is not a failure: it reaches the program's handler
+(controllers.signals).
 """
 
 from __future__ import annotations
@@ -23,6 +25,7 @@ from controllers.interface import ControlResult, FallbackKind
 from controllers.obstacles import Obstacle, predict_obstacles
 from controllers.ocp import OCPParameters, Plan
 from controllers.references import Reference
+from controllers.signals import deliver_after_solve
 
 #: A safety constraint whose residual is at most this (m or m^2) counts as active.
 ACTIVE_TOL = 1e-4
@@ -116,10 +119,11 @@ class NMPCController:
         params = self._parameters(state, reference, obstacles, t)
         guess = self._initial_guess(state, params)
         p_vec = params.to_vector()
-        try:
-            raw = self._backend.solve(p_vec, guess.to_vector(self._layout))
-        except Exception as exc:  # noqa: BLE001 - a control loop must survive any solver error
-            raw = RawSolution(guess.to_vector(self._layout), False, f"exception: {exc}", -1)
+        with deliver_after_solve():  # an interrupt is delivered, never taken for a failed solve
+            try:
+                raw = self._backend.solve(p_vec, guess.to_vector(self._layout))
+            except Exception as exc:  # noqa: BLE001 - a control loop must survive any solver error
+                raw = RawSolution(guess.to_vector(self._layout), False, f"exception: {exc}", -1)
         if raw.success:
             plan, fallback = Plan.from_vector(raw.decision, self._layout), "none"
             self._plan, self._plan_age = plan, 0

@@ -64,7 +64,7 @@ def spec_sheet_half_diagonal_m() -> float:
 
 
 def drive_config(scenario: Scenario) -> DriveConfig:
-    return DriveConfig(**scenario.drive)
+    return scenario.drive.config()
 
 
 def radius_margin_m(scenario: Scenario) -> float:

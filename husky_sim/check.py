@@ -26,11 +26,11 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import yaml
 
 from controllers import SAFETY_CONSTRAINTS, SafetyConstraint
 from husky_sim.audit import AuditThresholds, Finding, audit, measure_solve_times
-from husky_sim.scenario import Scenario
+from husky_sim.scenario import Scenario, scenario_from_data
+from husky_sim.scenario_file import scenario_yaml
 from husky_sim.sweep import (
     BACKENDS,
     Backend,
@@ -118,7 +118,7 @@ def with_horizon(scenario: Scenario, horizon: int | None) -> Scenario:
         return scenario
     data = scenario.model_dump()
     data["controller"]["horizon"] = horizon
-    return Scenario.model_validate(data)
+    return scenario_from_data(data, "--horizon")
 
 
 def sweep_stats(results: Sequence[dict[str, Any]]) -> dict[str, Any]:
@@ -183,12 +183,11 @@ def save_failure(scenario: Scenario, result: dict[str, Any], controller: str, ou
     path.parent.mkdir(parents=True, exist_ok=True)
     clearance = result["min_clearance_m"]
     header = (
-        f"# husky-sim check failure: sample {result['index']}, outcome {result['outcome']}, min clearance "
+        f"husky-sim check failure: sample {result['index']}, outcome {result['outcome']}, min clearance "
         f"{'n/a' if clearance is None else f'{clearance:.4f} m'}\n"
-        f"# reproduce: husky-sim run {path} --controller {controller}\n"
+        f"reproduce: husky-sim run {path} --controller {controller}"
     )
-    body = yaml.safe_dump(scenario.model_dump(mode="json", exclude_none=True), sort_keys=False)
-    path.write_text(header + body)
+    path.write_text(scenario_yaml(scenario.model_dump(mode="json", exclude_none=True), header))
     return path
 
 

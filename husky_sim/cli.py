@@ -1,4 +1,10 @@
-"""`husky-sim` command line. User mistakes give one line on stderr and exit code 2."""
+"""`husky-sim` command line. User mistakes give one line on stderr and exit code 2; Ctrl-C and
+SIGTERM exit 130 and 143 (husky_sim.interrupts), with what was run so far kept and marked
+`interrupted`.
+
+Heavy modules (CasADi, PyBullet's worlds, the scenario schema) are imported after the signal
+handlers are installed, so an interrupt during start-up is honoured too.
+"""
 
 from __future__ import annotations
 
@@ -7,8 +13,11 @@ import math
 import sys
 from collections.abc import Sequence
 
-from controllers import SAFETY_CONSTRAINTS, ConfigError
-from husky_sim.scenario import ScenarioError
+from husky_sim import interrupts
+
+#: The controllers a command may choose (controllers.SAFETY_CONSTRAINTS, without importing CasADi
+#: before the signal handlers are in place; a test keeps the two equal).
+CONTROLLER_CHOICES = ("none", "bt", "cbf", "relax-cbf")
 
 
 class UsageError(Exception):
@@ -22,33 +31,33 @@ class _OneLineErrorParser(argparse.ArgumentParser):
         self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
 
 
-def _int_at_least(minimum: int):
-    """An argparse type: an integer >= minimum, else a one-line error."""
+def _number_in(kind: type[int] | type[float], low: float, high: float):
+    """An argparse type: an integer (kind int) or a finite number (kind float) in [low, high],
+    else a one-line error naming the range."""
+    word = "an integer" if kind is int else "a number"
 
-    def parse(text: str) -> int:
+    def parse(text: str) -> int | float:
         try:
-            value = int(text)
+            value = kind(text)
         except ValueError:
-            raise argparse.ArgumentTypeError(f"expected an integer >= {minimum}, got {text!r}") from None
-        if value < minimum:
-            raise argparse.ArgumentTypeError(f"expected an integer >= {minimum}, got {value}")
+            raise argparse.ArgumentTypeError(
+                f"expected {word} in [{low:g}, {high:g}], got {text[:40]!r}"
+            ) from None
+        if not (math.isfinite(value) and low <= value <= high):
+            raise argparse.ArgumentTypeError(f"expected {word} in [{low:g}, {high:g}], got {value:g}")
         return value
 
     return parse
 
 
-_positive_int = _int_at_least(1)
-_non_negative_int = _int_at_least(0)
-
-
-def _unit_float(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a number in [0, 1], got {text!r}") from None
-    if not 0.0 <= value <= 1.0:
-        raise argparse.ArgumentTypeError(f"expected a number in [0, 1], got {value}")
-    return value
+#: Bounds of the command line's counts: what a 2-core machine (or a cluster) can reasonably run.
+MAX_JOBS = 256
+MAX_SAMPLES = 100_000
+_horizon = _number_in(int, 1, 50)
+_seed = _number_in(int, 0, 2**32 - 1)
+_jobs = _number_in(int, 1, MAX_JOBS)
+_count = _number_in(int, 1, MAX_SAMPLES)
+_unit_float = _number_in(float, 0.0, 1.0)
 
 
 def _cmd_bench(args: argparse.Namespace) -> int:
@@ -92,30 +101,45 @@ def _cmd_scenarios(args: argparse.Namespace) -> int:
     return 0
 
 
+def _warn(message: str) -> None:
+    print(f"husky-sim: warning: {message}", file=sys.stderr)
+
+
+def warn_solve_budget(summary: dict[str, object], label: str = "") -> None:
+    """Say on stderr when solves took longer than tau (the summary says so too)."""
+    over = summary.get("solves_over_budget") or 0
+    if over:
+        _warn(
+            f"{label}{over} of {summary['steps']} solves took longer than tau = "
+            f"{summary['solve_budget_ms']:g} ms (median {summary['solve_ms_median']:.1f} ms, max "
+            f"{summary['solve_ms_max']:.1f} ms): on a robot those commands would arrive late"
+        )
+
+
 def _cmd_run(args: argparse.Namespace) -> int:
     from pathlib import Path
 
     from husky_sim.rendering import options_from_args, record_in_summary, render_run
-    from husky_sim.run import run_dir_name, run_scenario
+    from husky_sim.run import default_run_dir, prepare_out_dir, run_scenario
     from husky_sim.scenario import load_scenario
 
-    sc = load_scenario(args.scenario)
+    interrupts.check()  # the imports above take a second; a signal swallowed in them ends here
+    sc = load_scenario(args.scenario).with_overrides(args.horizon, args.gamma, args.seed)
+    interrupts.check()  # loading builds the robot geometry (yourdfpy, trimesh)
     video = options_from_args(args) if args.video else None  # bad render options fail before the run
-    horizon = args.horizon or sc.controller.horizon
-    gamma = sc.controller.gamma if args.gamma is None else args.gamma
-    seed = sc.seed if args.seed is None else args.seed
-    out = (
-        Path(args.out)
-        if args.out
-        else Path("results") / run_dir_name(sc.name, args.controller, horizon, gamma, seed)
+    horizon, gamma = sc.controller.horizon, sc.controller.gamma
+    interrupts.begin_run()
+    out = prepare_out_dir(
+        Path(args.out) if args.out else default_run_dir(sc.name, args.controller, horizon, gamma, sc.seed)
     )
-    summary = run_scenario(sc, args.controller, horizon, gamma, seed, out)
+    summary = run_scenario(sc, args.controller, out_dir=out)
     clearance = summary["min_clearance_m"]
     clearance_text = "n/a" if clearance is None else f"{clearance:.3f} m"
     print(
         f"{sc.name} {args.controller} N={horizon} gamma={gamma:g}: {summary['outcome']}, "
         f"min clearance {clearance_text}, solve median {summary['solve_ms_median']:.2f} ms -> {out}"
     )
+    warn_solve_budget(summary)
     if video is not None:  # rendered afterwards from the written trace: it cannot touch the physics
         result = render_run(out, video)
         record_in_summary(out, result)
@@ -134,15 +158,29 @@ def _cmd_render(args: argparse.Namespace) -> int:
 def _cmd_suite(args: argparse.Namespace) -> int:
     from pathlib import Path
 
+    from husky_sim.run import prepare_out_dir
     from husky_sim.scenario import load_scenario, shipped_scenarios
     from husky_sim.suite import markdown_table, matrix, run_suite, write_figures
 
     names = args.scenarios or [p.stem for p in shipped_scenarios()]
-    for name in names:
-        load_scenario(name)  # bad input fails here, in one line, before any worker starts
+    for name in names:  # bad input fails here, in one line, before any worker starts
+        sc = load_scenario(name)
+        for horizon in args.horizons or [None]:
+            for gamma in args.gammas or [None]:
+                sc.with_overrides(horizon, gamma, args.seed)
     cells = matrix(names, args.controllers, args.horizons or [None], args.gammas or [None], args.seed)
-    out = Path(args.out)
-    rows = run_suite(cells, jobs=args.jobs, out_dir=out, progress=not args.quiet)
+    interrupts.begin_run()
+    out = prepare_out_dir(Path(args.out))
+    try:
+        rows = run_suite(cells, jobs=args.jobs, out_dir=out, progress=not args.quiet)
+    except interrupts.RunInterrupted:
+        print(
+            f"husky-sim: suite interrupted: no results.csv written; runs so far in {out / 'runs'}",
+            file=sys.stderr,
+        )
+        raise
+    for row in rows:
+        warn_solve_budget(row, f"{row.get('run_dir') or row['scenario']}: ")
     figures = write_figures(rows, out, per_run=args.plots)
     print(markdown_table(rows), end="")
     print(f"{len(figures)} figures (PNG and SVG) -> {out / 'plots'}")
@@ -171,10 +209,15 @@ def _cmd_check(args: argparse.Namespace) -> int:
         timing_solves=args.timing_solves,
         min_pass_rate=args.min_pass_rate,
     )
+    from husky_sim.run import prepare_out_dir
+
     sc = load_scenario(args.scenario)
-    horizon = args.horizon or sc.controller.horizon
+    horizon = sc.with_overrides(horizon=args.horizon).controller.horizon  # range-checked here
     seed = sc.seed if args.seed is None else args.seed
-    out = Path(args.out or default_out_dir(sc.name, args.controller, horizon, args.samples, seed))
+    interrupts.begin_run()  # workers are stopped, not orphaned, on a signal
+    out = prepare_out_dir(
+        Path(args.out or default_out_dir(sc.name, args.controller, horizon, args.samples, seed))
+    )
     report = run_check(sc, options, out, log=print)
     s = report.stats
     print(f"sweep: {s['passed']}/{s['samples']} passed ({s['pass_rate']:.0%}), outcomes {s['outcomes']}")
@@ -212,23 +255,15 @@ def _cmd_paper(args: argparse.Namespace) -> int:
     from pathlib import Path
 
     from husky_sim.claims import run_paper_report
+    from husky_sim.run import prepare_out_dir
 
-    out = Path(args.out)
+    interrupts.begin_run()  # workers are stopped, not orphaned, on a signal
+    out = prepare_out_dir(Path(args.out))
     results = run_paper_report(out, jobs=args.jobs, progress=not args.quiet)
     for r in results:
         print(f"{r.kinematic.verdict:>15s} | {r.physics.verdict:>15s} | {r.claim}")
     print(f"(kinematic | PyBullet) -> {out / 'claims.md'}")
     return 0
-
-
-def _positive_float(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a number > 0, got {text!r}") from None
-    if not (value > 0 and math.isfinite(value)):
-        raise argparse.ArgumentTypeError(f"expected a finite number > 0, got {value}")
-    return value
 
 
 def _cmd_replay(args: argparse.Namespace) -> int:
@@ -260,10 +295,10 @@ def build_parser() -> argparse.ArgumentParser:
     scenarios.set_defaults(func=_cmd_scenarios)
     run = sub.add_parser("run", help="run one scenario in PyBullet; writes summary.json and log.csv")
     run.add_argument("scenario", help="a scenario YAML path or the name of a shipped scenario")
-    run.add_argument("--controller", choices=SAFETY_CONSTRAINTS, default="relax-cbf")
-    run.add_argument("--horizon", type=_positive_int, default=None, help="prediction steps N >= 1")
+    run.add_argument("--controller", choices=CONTROLLER_CHOICES, default="relax-cbf")
+    run.add_argument("--horizon", type=_horizon, default=None, help="prediction steps N in [1, 50]")
     run.add_argument("--gamma", type=_unit_float, default=None, help="CBF decay rate in [0, 1]")
-    run.add_argument("--seed", type=_non_negative_int, default=None, help="noise and random-field seed")
+    run.add_argument("--seed", type=_seed, default=None, help="noise and random-field seed")
     run.add_argument("--out", default=None, help="output directory (default results/<run>)")
     run.add_argument("--video", action="store_true", help="then render OUT/video_CAMERA.mp4 from its trace")
     add_render_arguments(run)
@@ -276,28 +311,26 @@ def build_parser() -> argparse.ArgumentParser:
     suite = sub.add_parser("suite", help="run a scenario x controller x horizon x gamma matrix in parallel")
     suite.add_argument("--scenarios", nargs="+", default=None, help="names or paths (default: all shipped)")
     suite.add_argument(
-        "--controllers", nargs="+", choices=SAFETY_CONSTRAINTS, default=["bt", "cbf", "relax-cbf"]
+        "--controllers", nargs="+", choices=CONTROLLER_CHOICES, default=["bt", "cbf", "relax-cbf"]
     )
-    suite.add_argument("--horizons", nargs="+", type=_positive_int, default=None, help="default: file's N")
+    suite.add_argument("--horizons", nargs="+", type=_horizon, default=None, help="default: file's N")
     suite.add_argument("--gammas", nargs="+", type=_unit_float, default=None, help="default: file's gamma")
-    suite.add_argument("--seed", type=_non_negative_int, default=None, help="seed (default: the file's)")
-    suite.add_argument("--jobs", type=_positive_int, default=2, help="worker processes (default 2)")
+    suite.add_argument("--seed", type=_seed, default=None, help="seed (default: the file's)")
+    suite.add_argument("--jobs", type=_jobs, default=2, help="worker processes (default 2)")
     suite.add_argument("--out", default="results/suite", help="output directory (default results/suite)")
     suite.add_argument("--quiet", action="store_true", help="no progress bar")
     suite.add_argument("--plots", action="store_true", help="also every run's own figures")
     suite.set_defaults(func=_cmd_suite)
     paper = sub.add_parser("paper", help="check the paper's claims; writes claims.md")
     paper.add_argument("--out", default="results/paper", help="output directory (default results/paper)")
-    paper.add_argument("--jobs", type=_positive_int, default=2, help="worker processes (default 2)")
+    paper.add_argument("--jobs", type=_jobs, default=2, help="worker processes (default 2)")
     paper.add_argument("--quiet", action="store_true", help="no progress bar")
     paper.set_defaults(func=_cmd_paper)
     bench = sub.add_parser("bench", help="NMPC solve-time benchmark: ours vs a casadi.Opti baseline")
     bench.add_argument("--json", action="store_true", help="print JSON records instead of a table")
-    bench.add_argument(
-        "--steps", type=_positive_int, default=150, help="control steps per cell (default 150)"
-    )
-    bench.add_argument("--variants", nargs="+", choices=SAFETY_CONSTRAINTS, default=list(SAFETY_CONSTRAINTS))
-    bench.add_argument("--horizons", nargs="+", type=_positive_int, default=[5, 7, 12])
+    bench.add_argument("--steps", type=_count, default=150, help="control steps per cell (default 150)")
+    bench.add_argument("--variants", nargs="+", choices=CONTROLLER_CHOICES, default=list(CONTROLLER_CHOICES))
+    bench.add_argument("--horizons", nargs="+", type=_horizon, default=[5, 7, 12])
     bench.add_argument(
         "--obstacles", nargs="+", type=int, choices=range(1, 8), default=[1, 7], metavar="{1..7}"
     )
@@ -307,21 +340,28 @@ def build_parser() -> argparse.ArgumentParser:
     )
     bench.set_defaults(func=_cmd_bench)
     bench_sim = sub.add_parser("bench-sim", help="PyBullet real-time factor and peak memory")
-    bench_sim.add_argument("--duration", type=float, default=30.0, help="episode length in s (default 30)")
+    bench_sim.add_argument(
+        "--duration",
+        type=_number_in(float, 0.1, 600.0),
+        default=30.0,
+        help="episode length in s, 0.1 to 600 (default 30)",
+    )
     bench_sim.add_argument(
         "--drive-table", action="store_true", help="also print achieved vs commanded v and omega"
     )
     bench_sim.set_defaults(func=_cmd_bench_sim)
     check = sub.add_parser("check", help="sim-to-real checks before a Husky trial: audit + robustness sweep")
     check.add_argument("scenario", help="a scenario YAML path or the name of a shipped scenario")
-    check.add_argument("--controller", choices=SAFETY_CONSTRAINTS, default="relax-cbf")
-    check.add_argument("--horizon", type=int, default=None, help="prediction steps N (default: the file's)")
-    check.add_argument("--samples", type=int, default=32, help="perturbed runs K >= 1 (default 32)")
-    check.add_argument("--jobs", type=int, default=None, help="worker processes (default: all cores)")
-    check.add_argument("--seed", type=_non_negative_int, default=None, help="perturbation seed >= 0")
+    check.add_argument("--controller", choices=CONTROLLER_CHOICES, default="relax-cbf")
+    check.add_argument(
+        "--horizon", type=_horizon, default=None, help="prediction steps N (default: the file's)"
+    )
+    check.add_argument("--samples", type=_count, default=32, help="perturbed runs K >= 1 (default 32)")
+    check.add_argument("--jobs", type=_jobs, default=None, help="worker processes (default: all cores)")
+    check.add_argument("--seed", type=_seed, default=None, help="perturbation seed >= 0")
     check.add_argument("--backend", choices=("local", "dask"), default="local", help="where samples run")
     check.add_argument("--scheduler", default=None, help="Dask scheduler address (default: a LocalCluster)")
-    check.add_argument("--timing-solves", type=int, default=100, help="NMPC solves timed (default 100)")
+    check.add_argument("--timing-solves", type=_count, default=100, help="NMPC solves timed (default 100)")
     check.add_argument(
         "--min-pass-rate", type=_unit_float, default=0.95, help="pass rate needed in [0, 1] (default 0.95)"
     )
@@ -348,26 +388,49 @@ def build_parser() -> argparse.ArgumentParser:
         "--fit", action="store_true", help="fit the multiplier and ground friction not given below to the ATE"
     )
     replay.add_argument(
-        "--wheel-separation-multiplier", type=_positive_float, default=None, metavar="M", help="default 1.875"
+        "--wheel-separation-multiplier",
+        type=_number_in(float, 0.5, 5.0),
+        default=None,
+        metavar="M",
+        help="default 1.875",
     )
     replay.add_argument(
-        "--ground-friction", type=_positive_float, default=None, metavar="MU", help="default 1.0"
+        "--ground-friction", type=_number_in(float, 0.01, 5.0), default=None, metavar="MU", help="default 1.0"
     )
     replay.set_defaults(func=_cmd_replay)
     return parser
 
 
+def _interrupted(signum: int) -> int:
+    code = interrupts.RunInterrupted(signum).exit_code
+    print(f"husky-sim: {interrupts.RunInterrupted(signum)}; exit {code}", file=sys.stderr)
+    return code
+
+
 def main(argv: Sequence[str] | None = None) -> int:
-    parser = build_parser()
-    args = parser.parse_args(argv)
+    interrupts.install()  # first: an interrupt during start-up is honoured too
     try:
-        return args.func(args)
-    except (UsageError, ConfigError, ScenarioError, ValueError) as exc:
-        print(f"husky-sim: error: {exc}", file=sys.stderr)
+        parser = build_parser()
+        args = parser.parse_args(argv)
+        interrupts.check()
+        code = args.func(args)
+    except interrupts.RunInterrupted as exc:
+        return _interrupted(exc.signum)
+    except KeyboardInterrupt:  # raised where our handler was not in place
+        return _interrupted(interrupts.pending() or 2)
+    except (UsageError, ValueError) as exc:  # ConfigError and ScenarioError are ValueErrors
+        print(f"husky-sim: error: {_one_line(exc)}", file=sys.stderr)
         return 2
-    except KeyboardInterrupt:
-        print("husky-sim: interrupted", file=sys.stderr)
-        return 130
+    except OSError as exc:  # the machine, not the user: a full disk, a vanished directory
+        print(f"husky-sim: error: {_one_line(exc)}", file=sys.stderr)
+        return 1
+    signum = interrupts.pending()  # a signal a library swallowed still ends the command as one
+    return _interrupted(signum) if signum is not None else code
+
+
+def _one_line(exc: BaseException) -> str:
+    text = " ".join(str(exc).split())
+    return text if len(text) <= 500 else text[:497] + "..."
 
 
 if __name__ == "__main__":

@@ -14,7 +14,8 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 import numpy as np
-import pybullet as p
+
+from husky_sim.bullet import pybullet as p
 
 
 class ClearanceMonitor:

@@ -3,7 +3,9 @@
 Physics runs at `physics_hz`; every tau seconds the runner senses, calls the controller and holds
 its command (through the drive's limits) until the next control step. Collision is checked by the
 physics engine every physics step (husky_sim.collision). Each control step writes one log row,
-flushed at once, so a run that is interrupted or fails keeps what it logged.
+flushed at once, so a run that is interrupted or fails keeps what it logged. A signal (Ctrl-C,
+SIGTERM; husky_sim.interrupts) ends the loop at once with the outcome `interrupted` and the
+steps completed, so an interrupted run can never pass for a result.
 
 Determinism: the same scenario, seed and code give the same log, except the wall-clock columns
 (`solve_ms`, and anything that depends on it: deadline mode holds a command when a solve is slower
@@ -14,6 +16,7 @@ from __future__ import annotations
 
 import csv
 import math
+import signal
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -23,9 +26,11 @@ import numpy as np
 
 from controllers import Controller, Reference, SetPoint
 from controllers.model import wrap_angle
+from husky_sim import interrupts
 from husky_sim.collision import ClearanceMonitor
 from husky_sim.drive import DriveConfig, SkidSteerDrive
-from husky_sim.metrics import EpisodeMetrics, is_idle, summarise
+from husky_sim.interrupts import RunInterrupted
+from husky_sim.metrics import EpisodeMetrics, is_stuck_window, summarise
 from husky_sim.robot import HuskyRobot, WheelFriction
 from husky_sim.sensing import SensingConfig, Sensor
 from husky_sim.trace import TRACE_HZ, EpisodeTrace
@@ -123,6 +128,7 @@ class EpisodeResult:
     rows: list[dict[str, object]]
     predicted_states: list[np.ndarray]  # per control step, (N+1, 3)
     trace: EpisodeTrace  # poses and obstacles at TRACE_HZ, plans, reference path (for rendering)
+    interrupted_by: int | None = None  # the signal that ended the run early (outcome "interrupted")
 
 
 class _Log:
@@ -170,6 +176,7 @@ def run_episode(
             f"tau_s: the episode's control period ({config.tau_s} s) must equal the controller's "
             f"sampling time ({controller_tau} s)"
         )
+    interrupts.check()
     world = World(config.world)
     log = _Log(log_path)
     try:
@@ -212,88 +219,94 @@ def _run(
     command = np.zeros(2)
     outcome, in_tolerance, reached_at = None, 0, None
     recorder = _TraceRecorder(robot, world, max(round(config.world.physics_hz / TRACE_HZ), 1))
-    for k in range(steps):
-        t = k * config.tau_s
-        pose, body, wheels = robot.pose(), robot.body_velocity(), robot.wheel_speeds()
-        measurement = sensor.measure(pose, world.obstacle_states())
-        result = controller.solve(measurement.pose, reference, measurement.obstacles, t)
-        deadline_miss = config.deadline_mode and result.solve_time_s > config.tau_s
-        if not deadline_miss:
-            command = np.asarray(result.control, dtype=float)
-        clearance = math.inf
-        for _ in range(substeps):
-            applied = drive.limit(command, world.dt_s)
-            applied_history.append(applied)
-            robot.command_wheels(*drive.wheel_speeds(applied), config.drive.wheel_torque_limit_nm)
-            world.step()
-            recorder.sample()
-            if world.obstacle_ids or world.wall_ids:
-                xy = robot.pose()[:2]
-                distances = np.concatenate(
-                    [monitor.distances(xy, world.obstacle_centres()), monitor.wall_distances(xy)]
-                )
-                clearance = min(clearance, float(np.min(distances)))
-        new_pose = robot.pose()
-        ref_now = reference.state_at(t)
-        row = {
-            "step": k,
-            "t_s": t,
-            "x_m": pose[0],
-            "y_m": pose[1],
-            "yaw_rad": pose[2],
-            "ref_x_m": ref_now[0],
-            "ref_y_m": ref_now[1],
-            "ref_yaw_rad": float(wrap_angle(ref_now[2])),
-            "v_cmd_mps": float(command[0]),
-            "omega_cmd_radps": float(command[1]),
-            "v_applied_mps": float(applied[0]),
-            "omega_applied_radps": float(applied[1]),
-            "v_body_mps": float(body[0]),
-            "omega_body_radps": float(body[1]),
-            "wheel_l1_radps": float(wheels[0]),
-            "wheel_l2_radps": float(wheels[1]),
-            "wheel_r1_radps": float(wheels[2]),
-            "wheel_r2_radps": float(wheels[3]),
-            "clearance_m": clearance,
-            "s_h_min": float(np.min(result.decay_slack)),
-            "s_v_max": float(np.max(result.clf_slack)),
-            "safety_active": int(result.safety_active),
-            "iterations": int(result.iterations),
-            "status": result.status,
-            "fallback": result.fallback,
-            "deadline_miss": int(deadline_miss),
-            "solve_ms": 1000.0 * result.solve_time_s,
-        }
-        log.write(row)
-        rows.append(row)
-        plans.append(result.predicted_states)
+    interrupted_by: int | None = None
+    try:
+        for k in range(steps):
+            interrupts.check()  # also a signal that a library swallowed
+            t = k * config.tau_s
+            pose, body, wheels = robot.pose(), robot.body_velocity(), robot.wheel_speeds()
+            measurement = sensor.measure(pose, world.obstacle_states())
+            result = controller.solve(measurement.pose, reference, measurement.obstacles, t)
+            deadline_miss = config.deadline_mode and result.solve_time_s > config.tau_s
+            if not deadline_miss:
+                command = np.asarray(result.control, dtype=float)
+            clearance = math.inf
+            for _ in range(substeps):
+                applied = drive.limit(command, world.dt_s)
+                applied_history.append(applied)
+                robot.command_wheels(*drive.wheel_speeds(applied), config.drive.wheel_torque_limit_nm)
+                world.step()
+                recorder.sample()
+                if world.obstacle_ids or world.wall_ids:
+                    xy = robot.pose()[:2]
+                    distances = np.concatenate(
+                        [monitor.distances(xy, world.obstacle_centres()), monitor.wall_distances(xy)]
+                    )
+                    clearance = min(clearance, float(np.min(distances)))
+            new_pose = robot.pose()
+            ref_now = reference.state_at(t)
+            row = {
+                "step": k,
+                "t_s": t,
+                "x_m": pose[0],
+                "y_m": pose[1],
+                "yaw_rad": pose[2],
+                "ref_x_m": ref_now[0],
+                "ref_y_m": ref_now[1],
+                "ref_yaw_rad": float(wrap_angle(ref_now[2])),
+                "v_cmd_mps": float(command[0]),
+                "omega_cmd_radps": float(command[1]),
+                "v_applied_mps": float(applied[0]),
+                "omega_applied_radps": float(applied[1]),
+                "v_body_mps": float(body[0]),
+                "omega_body_radps": float(body[1]),
+                "wheel_l1_radps": float(wheels[0]),
+                "wheel_l2_radps": float(wheels[1]),
+                "wheel_r1_radps": float(wheels[2]),
+                "wheel_r2_radps": float(wheels[3]),
+                "clearance_m": clearance,
+                "s_h_min": float(np.min(result.decay_slack)),
+                "s_v_max": float(np.max(result.clf_slack)),
+                "safety_active": int(result.safety_active),
+                "iterations": int(result.iterations),
+                "status": result.status,
+                "fallback": result.fallback,
+                "deadline_miss": int(deadline_miss),
+                "solve_ms": 1000.0 * result.solve_time_s,
+            }
+            with interrupts.deferred():  # a row is written whole or not at all
+                log.write(row)
+                rows.append(row)
+                plans.append(result.predicted_states)
 
-        t_next = t + config.tau_s
-        if clearance <= 0.0:
-            outcome = "collided"  # a collision names the episode whatever happens after it
-            if outcomes.stop_on_collision:
-                break
-        pos_err, head_err = _reference_error(new_pose, reference.state_at(t_next))
-        if is_setpoint:
-            ok = pos_err <= outcomes.goal_position_m and head_err <= outcomes.goal_heading_rad
-            in_tolerance = in_tolerance + 1 if ok else 0
-            if in_tolerance == 1 and outcome is None:
-                reached_at = t_next  # entry into the tolerance band that is then held
-            if in_tolerance >= hold_steps and outcome is None:
-                outcome = "reached"
+            t_next = t + config.tau_s
+            if clearance <= 0.0:
+                outcome = "collided"  # a collision names the episode whatever happens after it
+                if outcomes.stop_on_collision:
+                    break
+            pos_err, head_err = _reference_error(new_pose, reference.state_at(t_next))
+            if is_setpoint:
+                ok = pos_err <= outcomes.goal_position_m and head_err <= outcomes.goal_heading_rad
+                in_tolerance = in_tolerance + 1 if ok else 0
+                if in_tolerance == 1 and outcome is None:
+                    reached_at = t_next  # entry into the tolerance band that is then held
+                if in_tolerance >= hold_steps and outcome is None:
+                    outcome = "reached"
+                    if outcomes.stop_early:
+                        break
+            away = pos_err > (outcomes.goal_position_m if is_setpoint else outcomes.tracking_rmse_m)
+            if (
+                away
+                and t_next >= outcomes.stuck_grace_s
+                and is_stuck_window(rows, outcomes)
+                and outcome is None
+            ):
+                outcome = "stuck"
                 if outcomes.stop_early:
                     break
-        away = pos_err > (outcomes.goal_position_m if is_setpoint else outcomes.tracking_rmse_m)
-        recent = rows[-outcomes.stuck_window_steps :]
-        if (
-            away
-            and t_next >= outcomes.stuck_grace_s
-            and is_idle([r["v_body_mps"] for r in recent], [r["omega_body_radps"] for r in recent], outcomes)
-            and outcome is None
-        ):
-            outcome = "stuck"
-            if outcomes.stop_early:
-                break
+    except (RunInterrupted, KeyboardInterrupt) as exc:  # the steps so far are kept and judged as such
+        interrupted_by = exc.signum if isinstance(exc, RunInterrupted) else int(signal.SIGINT)
+        outcome = "interrupted"
     metrics = summarise(
         rows,
         np.array(applied_history),
@@ -309,9 +322,10 @@ def _run(
         footprint_radius_m=robot.geometry.footprint_radius_m,
         final_pose=robot.pose(),
         sim_time_s=world.time_s,
+        interrupted_by=interrupted_by,
     )
     trace = recorder.finish(rows, plans, reference, config, robot_radius_m, robot.geometry.footprint_radius_m)
-    return EpisodeResult(metrics, rows, plans, trace)
+    return EpisodeResult(metrics, rows, plans, trace, interrupted_by)
 
 
 class _TraceRecorder:

@@ -8,10 +8,14 @@ control step) and `trace.npz` (obstacles at 60 Hz, the reference path, the goal)
   s_v, and a histogram of solve times against the control period tau.
 * `plot_comparison`: several runs of one scenario overlaid (xy, v, omega, clearance).
 * `plot_tuning_maps`: from a suite's `results.csv`, gamma x N maps of outcome, minimum clearance
-  and time to goal (tracking RMSE for tracking scenarios), per scenario and controller.
+  and time to goal (tracking RMSE for tracking scenarios), per scenario and controller. Clearance
+  colours are absolute and the same on every map: red at or below 0 m (contact), green from
+  SAFE_CLEARANCE_M up. An empty panel says what is missing and why.
 
-Every figure is written as `<name>.png` and `<name>.svg`; SVGs carry no date and a fixed hash
-salt so the same input gives the same file. Units: m, s, rad, m/s, rad/s; B is in m^2.
+The xy panels are framed on everything they draw (obstacles grown by the robot radius, start,
+goal or reference, moving obstacles' marks, walls) with a small margin. Every figure is written as
+`<name>.png` and `<name>.svg`, cropped to its drawn extent (no label cut); SVGs carry no date and
+a fixed hash salt so the same input gives the same file. Units: m, s, rad, m/s, rad/s; B in m^2.
 """
 
 from __future__ import annotations
@@ -33,8 +37,9 @@ matplotlib.use("Agg")  # no display needed; must precede the pyplot import
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 from matplotlib.axes import Axes  # noqa: E402
-from matplotlib.colors import ListedColormap, to_rgba  # noqa: E402
+from matplotlib.colors import Colormap, ListedColormap, Normalize, to_rgba  # noqa: E402
 from matplotlib.figure import Figure  # noqa: E402
+from matplotlib.image import AxesImage  # noqa: E402
 from matplotlib.patches import Circle, Patch, Rectangle  # noqa: E402
 
 from husky_sim.trace import EpisodeTrace  # noqa: E402
@@ -78,10 +83,20 @@ OUTCOME_CATEGORIES = (
 
 RESULTS_NEEDED = ("scenario", "controller", "horizon", "gamma", "outcome")
 
+#: Clearance (m) at and above which a tuning-map cell is fully green; at or below 0 m (contact,
+#: a collision) it is fully red. One fixed scale for every map, so colours compare across maps.
+SAFE_CLEARANCE_M = 0.5
+CLEARANCE_CMAP = "RdYlGn"  # red - yellow - green
+
+#: Free border (m) of the xy panels around everything drawn, plus this fraction of the larger side.
+SCENE_MARGIN_M = 0.3
+SCENE_MARGIN_FRACTION = 0.04
+
 MOVING_COLOUR = "tab:pink"  # the paper draws moving obstacles as pink dashed lines
 LIMIT_STYLE = {"color": "tab:red", "linestyle": "--", "linewidth": 0.9}
 
 FigurePaths = tuple[Path, Path]  # (png, svg)
+SceneBox = tuple[np.ndarray, np.ndarray]  # (lower-left, upper-right) corners (m)
 
 
 class PlotInputError(ValueError):
@@ -253,9 +268,9 @@ def _save(fig: Figure, out_dir: Path, stem: str) -> FigurePaths:
     try:
         out_dir.mkdir(parents=True, exist_ok=True)
         png, svg = out_dir / f"{stem}.png", out_dir / f"{stem}.svg"
-        fig.savefig(png, dpi=DPI)
+        fig.savefig(png, dpi=DPI, bbox_inches="tight", pad_inches=0.1)  # no label cut at the edges
         with plt.rc_context({"svg.hashsalt": "husky-sim"}):
-            fig.savefig(svg, metadata={"Date": None})
+            fig.savefig(svg, metadata={"Date": None}, bbox_inches="tight", pad_inches=0.1)
     finally:
         plt.close(fig)
     return png, svg
@@ -379,32 +394,67 @@ def _draw_arena(ax: Axes, trace: EpisodeTrace) -> None:
         )
 
 
-def _scene_box(
-    trace: EpisodeTrace, trajectories: Iterable[np.ndarray], margin_m: float = 0.7
-) -> tuple[np.ndarray, np.ndarray]:
-    """(lower-left, upper-right) corners (m) framing the trajectories, the reference or goal and
-    the static obstacles, with margin_m around them (moving obstacles' paths may leave it)."""
-    boxes = [np.vstack([p.min(axis=0), p.max(axis=0)]) for p in trajectories if len(p)]
+def _points_box(xy_m: np.ndarray, radius_m: float | np.ndarray = 0.0) -> np.ndarray:
+    """(2, 2) [lower-left, upper-right] (m) of points xy_m (P, 2) grown by radius_m (scalar or (P,))."""
+    r = np.broadcast_to(np.asarray(radius_m, dtype=float), xy_m.shape[:1])[:, None]
+    return np.vstack([(xy_m - r).min(axis=0), (xy_m + r).max(axis=0)])
+
+
+def scene_extent_boxes(
+    trace: EpisodeTrace, trajectories: Iterable[np.ndarray], robot_radius_m: float, t_end_s: float
+) -> list[np.ndarray]:
+    """(2, 2) boxes (m) of everything the xy panels draw for a scene shown up to t_end_s (s).
+
+    The trajectories (whose first points are the starts), the goal or the reference path, each
+    static obstacle's circle grown by robot_radius_m (the dotted circle, which holds the obstacle
+    when robot_radius_m >= 0), each moving obstacle's dashed path and its circles at the time
+    marks, and the arena walls.
+    """
+    boxes = [_points_box(np.asarray(p, dtype=float)[:, :2]) for p in trajectories if len(p)]
     if np.all(np.isfinite(trace.goal)):
-        boxes.append(np.vstack([trace.goal[:2], trace.goal[:2]]))
+        boxes.append(_points_box(trace.goal[None, :2]))
     elif len(trace.reference_path):
-        ref = trace.reference_path[:, :2]
-        boxes.append(np.vstack([ref.min(axis=0), ref.max(axis=0)]))
-    for j in np.flatnonzero(~moving_obstacles(trace)):
-        c, r = trace.obstacle_xy_m[0, j], trace.obstacle_radius_m[j]
-        boxes.append(np.vstack([c - r, c + r]))
-    lo = np.min([b[0] for b in boxes], axis=0) - margin_m
-    hi = np.max([b[1] for b in boxes], axis=0) + margin_m
-    return lo, hi
+        boxes.append(_points_box(trace.reference_path[:, :2]))
+    moving = moving_obstacles(trace)
+    static = np.flatnonzero(~moving)
+    if static.size:
+        radii = trace.obstacle_radius_m[static]
+        boxes.append(_points_box(trace.obstacle_xy_m[0, static], radii + max(robot_radius_m, 0.0)))
+    shown = trace.sample_t_s <= t_end_s + 1e-9
+    marks = obstacle_centres_at(trace, time_marks(t_end_s))
+    for j in np.flatnonzero(moving):
+        boxes.append(_points_box(marks[:, j], trace.obstacle_radius_m[j]))
+        if shown.any():
+            boxes.append(_points_box(trace.obstacle_xy_m[shown, j]))
+    half = trace.arena_half_size_m
+    if math.isfinite(half):
+        boxes.append(np.array([[-half, -half], [half, half]]))
+    return boxes
 
 
-def _scene_aspect(box: tuple[np.ndarray, np.ndarray]) -> float:
+def _scene_box(
+    trace: EpisodeTrace, trajectories: Iterable[np.ndarray], robot_radius_m: float, t_end_s: float
+) -> SceneBox:
+    """(lower-left, upper-right) corners (m) holding everything scene_extent_boxes lists, with a
+    free border of SCENE_MARGIN_M plus SCENE_MARGIN_FRACTION of the larger side."""
+    boxes = [
+        b for b in scene_extent_boxes(trace, trajectories, robot_radius_m, t_end_s) if np.all(np.isfinite(b))
+    ]
+    if not boxes:
+        boxes = [np.zeros((2, 2))]
+    lo = np.min([b[0] for b in boxes], axis=0)
+    hi = np.max([b[1] for b in boxes], axis=0)
+    margin_m = SCENE_MARGIN_M + SCENE_MARGIN_FRACTION * float(np.max(hi - lo))
+    return lo - margin_m, hi + margin_m
+
+
+def _scene_aspect(box: SceneBox) -> float:
     """Height over width of a scene box, clamped to [0.25, 3]."""
     lo, hi = box
     return float(np.clip((hi[1] - lo[1]) / max(hi[0] - lo[0], 1e-9), 0.25, 3.0))
 
 
-def _frame_xy(ax: Axes, box: tuple[np.ndarray, np.ndarray]) -> None:
+def _frame_xy(ax: Axes, box: SceneBox) -> None:
     """Limits to box, equal aspect, axis labels in m."""
     lo, hi = box
     ax.set_xlim(lo[0], hi[0])
@@ -415,8 +465,9 @@ def _frame_xy(ax: Axes, box: tuple[np.ndarray, np.ndarray]) -> None:
     ax.grid(True, linewidth=0.3)
 
 
-def _no_data(ax: Axes, text: str) -> None:
-    ax.text(0.5, 0.5, text, transform=ax.transAxes, ha="center", va="center", color="0.4")
+def _no_data(ax: Axes, text: str, fontsize: float | None = None) -> None:
+    """text, grey, in the middle of an empty panel."""
+    ax.text(0.5, 0.5, text, transform=ax.transAxes, ha="center", va="center", color="0.4", fontsize=fontsize)
 
 
 def _title(run: RunRecord) -> str:
@@ -454,14 +505,23 @@ def _draw_robot_marks(ax: Axes, run: RunRecord, marks_s: np.ndarray, t_end_s: fl
         )
 
 
-def _xy_figure(run: RunRecord) -> Figure:
+def _xy_figure_size_in(
+    box: SceneBox, max_width_in: float = 6.5, max_height_in: float = 9.0
+) -> tuple[float, float]:
+    """(width, height) in inches of the xy figure: the scene to scale in at most max_width_in x
+    max_height_in, plus room for the axis labels, the title and the legend on the right."""
+    width_m, height_m = np.maximum(box[1] - box[0], 1e-6)
+    inches_per_m = min(max_width_in / width_m, max_height_in / height_m)
+    return max(width_m * inches_per_m, 2.0) + 2.6, max(height_m * inches_per_m, 1.6) + 1.0
+
+
+def xy_figure(run: RunRecord) -> Figure:
+    """The run's path over its scene to scale, framed on everything drawn; constrained layout
+    (and _save crops to the drawn extent), so no label is cut for tall or wide scenes."""
     xy = np.column_stack([run.log["x_m"], run.log["y_m"]])
     t_end = float(run.log["t_s"][-1])
-    box = _scene_box(run.trace, [xy])
-    plot_width_in = 6.5
-    fig, ax = plt.subplots(
-        figsize=(plot_width_in + 2.2, plot_width_in * _scene_aspect(box) + 1.0), layout="constrained"
-    )
+    box = _scene_box(run.trace, [xy], run.robot_radius_m, t_end)
+    fig, ax = plt.subplots(figsize=_xy_figure_size_in(box), layout="constrained")
     _draw_scene(ax, run, t_end)
     ax.plot(xy[:, 0], xy[:, 1], "-", color="tab:blue", linewidth=1.6, zorder=4, label="robot")
     if moving_obstacles(run.trace).any():
@@ -610,7 +670,7 @@ def plot_run(run_dir: Path | str, out_dir: Path | str) -> dict[str, FigurePaths]
 
 def _plot_record(run: RunRecord, out: Path) -> dict[str, FigurePaths]:
     builders = {
-        "xy": _xy_figure,
+        "xy": xy_figure,
         "controls": _controls_figure,
         "safety": _safety_figure,
         "slacks": _slacks_figure,
@@ -683,12 +743,22 @@ def _check_comparable(runs: Sequence[RunRecord]) -> str:
 
 
 def _compare_records(runs: Sequence[RunRecord], stem: Path) -> FigurePaths:
+    """comparison_figure of runs, saved as stem.png and stem.svg."""
+    return _save(comparison_figure(runs), stem.parent, stem.name)
+
+
+def comparison_figure(runs: Sequence[RunRecord]) -> Figure:
+    """Runs of one scenario overlaid: xy over the first run's scene (framed on everything drawn),
+    and commanded v (m/s), omega (rad/s) and clearance (m) against t (s). The xy axes come first
+    in fig.axes. Raises PlotInputError when the runs are of different scenarios."""
     scenario = _check_comparable(runs)
     with_seed = len({r.summary.get("seed") for r in runs}) > 1
     first = runs[0]
-    box = _scene_box(first.trace, [np.column_stack([r.log["x_m"], r.log["y_m"]]) for r in runs])
+    t_end = max(float(r.log["t_s"][-1]) for r in runs)
+    paths = [np.column_stack([r.log["x_m"], r.log["y_m"]]) for r in runs]
+    box = _scene_box(first.trace, paths, first.robot_radius_m, t_end)
     fig, ax_xy, ax_v, ax_w, ax_c = _comparison_axes(_scene_aspect(box))
-    _draw_scene(ax_xy, first, max(float(r.log["t_s"][-1]) for r in runs))
+    _draw_scene(ax_xy, first, t_end)
     colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
     for i, run in enumerate(runs):
         colour = colours[i % len(colours)]
@@ -715,7 +785,7 @@ def _compare_records(runs: Sequence[RunRecord], stem: Path) -> FigurePaths:
     if not all(_same_obstacles(first.trace, r.trace) for r in runs[1:]):
         title += f" (obstacles drawn: {first.label(with_seed)}'s)"
     fig.suptitle(title, fontsize=11)
-    return _save(fig, stem.parent, stem.name)
+    return fig
 
 
 @dataclass(frozen=True)
@@ -818,6 +888,56 @@ class TuningGrid:
     min_clearance_m: np.ndarray  # (G, H) smallest over the cell's runs (worst case), NaN: none
     third: np.ndarray  # (G, H) mean time to goal (s) or tracking RMSE (m), NaN: none
     third_name: str  # "time to goal (s)" or "tracking RMSE (m)"
+    min_clearance_missing: str = ""  # why no cell has a clearance (shown on an empty panel)
+    third_missing: str = ""  # why no cell has a time to goal or RMSE
+
+
+#: What an empty tuning-map panel says when the scenario and controller have no runs at all.
+NO_RUNS_TEXT = "no runs with this scenario/controller\nin results.csv"
+
+
+def _runs_text(count: int) -> str:
+    """ "1 run" or "N runs"."""
+    return f"{count} run{'' if count == 1 else 's'}"
+
+
+def _column_missing(rows: Sequence[dict[str, str]], column: str) -> bool:
+    """Whether results.csv has no such column (DictReader rows then lack the key)."""
+    return not any(column in row for row in rows)
+
+
+def _outcome_counts(rows: Sequence[dict[str, str]]) -> str:
+    """The rows' outcomes, most frequent first, e.g. "stuck 3, timeout 1"."""
+    counts = Counter(row["outcome"].strip() or "?" for row in rows)
+    return ", ".join(f"{name} {count}" for name, count in counts.most_common())
+
+
+def clearance_missing_reason(rows: Sequence[dict[str, str]]) -> str:
+    """Why none of rows (one scenario and controller) has a min clearance, for an empty panel."""
+    if not rows:
+        return NO_RUNS_TEXT
+    if _column_missing(rows, "min_clearance_m"):
+        return "no min_clearance_m column\nin results.csv"
+    return (
+        f"no min_clearance_m value in results.csv\nfor {_runs_text(len(rows))} "
+        "(none is recorded\nwithout obstacles or walls)"
+    )
+
+
+def third_missing_reason(rows: Sequence[dict[str, str]]) -> str:
+    """Why none of rows has a time to goal (or tracking RMSE), for an empty panel."""
+    if not rows:
+        return NO_RUNS_TEXT
+    outcomes = [row["outcome"].strip() for row in rows]
+    tracking = outcomes.count("tracking")
+    reached = outcomes.count("reached")
+    if tracking:
+        return f"no tracking_rmse_m value in results.csv\nfor {_runs_text(len(rows))} ({tracking} tracking)"
+    if reached == 0:
+        return f"no run reached the goal\n({_outcome_counts(rows)}):\ntime to goal undefined"
+    if _column_missing(rows, "time_to_goal_s"):
+        return "no time_to_goal_s column\nin results.csv"
+    return f"time_to_goal_s empty in results.csv\nfor the {_runs_text(reached)} that reached the goal"
 
 
 def tuning_grid(rows: Sequence[dict[str, str]]) -> TuningGrid:
@@ -857,7 +977,17 @@ def tuning_grid(rows: Sequence[dict[str, str]]) -> TuningGrid:
         vals = [third_values[n] for n in members if math.isfinite(third_values[n])]
         third[gi, hi] = float(np.mean(vals)) if vals else np.nan
     third_name = "tracking RMSE (m)" if use_rmse else "time to goal (s)"
-    return TuningGrid(gammas, horizons, category, text, clearance, third, third_name)
+    return TuningGrid(
+        gammas,
+        horizons,
+        category,
+        text,
+        clearance,
+        third,
+        third_name,
+        min_clearance_missing=clearance_missing_reason(rows),
+        third_missing=third_missing_reason(rows),
+    )
 
 
 def _grid_axes(ax: Axes, grid: TuningGrid) -> None:
@@ -891,38 +1021,109 @@ def _outcome_map(ax: Axes, grid: TuningGrid) -> None:
     _grid_axes(ax, grid)
 
 
-def _value_map(ax: Axes, values: np.ndarray, title: str, cmap: str, fmt: str) -> None:
-    """Heatmap of values (NaN cells blank), each cell annotated with format(value, fmt)."""
+def clearance_norm() -> Normalize:
+    """The fixed clearance scale of every tuning map: 0 m (contact) .. SAFE_CLEARANCE_M, clipped."""
+    return Normalize(vmin=0.0, vmax=SAFE_CLEARANCE_M, clip=True)
+
+
+def clearance_colour(clearance_m: float) -> tuple[float, float, float, float]:
+    """RGBA of a min clearance (m) on the tuning maps: red at or below 0 m (a collision), yellow
+    halfway, green at or above SAFE_CLEARANCE_M; NaN (no value) is white."""
+    if not math.isfinite(clearance_m):
+        return (1.0, 1.0, 1.0, 1.0)
+    rgba = matplotlib.colormaps[CLEARANCE_CMAP](float(clearance_norm()(clearance_m)))
+    return tuple(float(c) for c in rgba)
+
+
+def _relative_norm(values: np.ndarray) -> Normalize:
+    """A scale from the smallest to the largest finite value; one value is centred in it."""
+    lo, hi = float(np.nanmin(values)), float(np.nanmax(values))
+    if hi - lo < 1e-12:
+        pad = max(0.1 * abs(lo), 1e-3)
+        lo, hi = lo - pad, hi + pad
+    return Normalize(vmin=lo, vmax=hi)
+
+
+def _value_map(
+    ax: Axes,
+    values: np.ndarray,
+    title: str,
+    fmt: str,
+    empty_text: str,
+    cmap: Colormap,
+    norm: Normalize | None = None,
+) -> AxesImage | None:
+    """Heatmap of values (NaN cells blank), each cell annotated with format(value, fmt).
+
+    norm None: a scale from the map's own smallest to largest value. Returns the image (for a
+    colour bar), or None, with empty_text written on the panel, when no cell has a value.
+    """
     ax.set_title(title, fontsize=9)
     ax.set_xlim(-0.5, values.shape[1] - 0.5)
     ax.set_ylim(-0.5, values.shape[0] - 0.5)
     if not np.any(np.isfinite(values)):
-        _no_data(ax, "no values")
-        return
-    colours = matplotlib.colormaps[cmap].with_extremes(bad="white")
-    lo, hi = float(np.nanmin(values)), float(np.nanmax(values))
-    if hi - lo < 1e-12:  # one value: centre it in the colour scale
-        pad = max(0.1 * abs(lo), 1e-3)
-        lo, hi = lo - pad, hi + pad
+        _no_data(ax, empty_text or "no values", fontsize=7)
+        return None
     image = ax.imshow(
-        np.ma.masked_invalid(values), cmap=colours, vmin=lo, vmax=hi, origin="lower", aspect="auto"
+        np.ma.masked_invalid(values),
+        cmap=cmap.with_extremes(bad="white"),
+        norm=norm or _relative_norm(values),
+        origin="lower",
+        aspect="auto",
     )
     for (gi, hi), value in np.ndenumerate(values):
         if math.isfinite(value):
             colour = _text_colour(image.cmap(image.norm(value)))
             ax.text(hi, gi, format(value, fmt), ha="center", va="center", fontsize=7, color=colour)
-    ax.figure.colorbar(image, ax=ax, shrink=0.8)
+    return image
 
 
-def _tuning_figure(scenario: str, controller: str, grid: TuningGrid, unplaced: int) -> Figure:
+def _clearance_map(ax: Axes, grid: TuningGrid) -> None:
+    """Min clearance (m) on the fixed scale of clearance_norm, with its colour bar."""
+    image = _value_map(
+        ax,
+        grid.min_clearance_m,
+        "min clearance (m)",
+        ".3f",
+        grid.min_clearance_missing,
+        matplotlib.colormaps[CLEARANCE_CMAP],
+        clearance_norm(),
+    )
+    if image is None:
+        return
+    bar = ax.figure.colorbar(image, ax=ax, shrink=0.8)
+    ticks = np.linspace(0.0, SAFE_CLEARANCE_M, 6)
+    bar.set_ticks(ticks, labels=["≤ 0", *(f"{t:g}" for t in ticks[1:-1]), f"≥ {SAFE_CLEARANCE_M:g}"])
+    safe = f"≥ {SAFE_CLEARANCE_M:g} m safe (green)"
+    bar.set_label(f"clearance (m), fixed scale on every map:\n≤ 0 m collision (red), {safe}", fontsize=7)
+
+
+def _third_map(ax: Axes, grid: TuningGrid) -> None:
+    """Time to goal (s) or tracking RMSE (m), on the map's own scale, with its colour bar."""
+    rmse = "RMSE" in grid.third_name
+    image = _value_map(
+        ax,
+        grid.third,
+        grid.third_name,
+        ".2f" if rmse else ".1f",
+        grid.third_missing,
+        matplotlib.colormaps["viridis_r"],
+    )
+    if image is not None:
+        bar = ax.figure.colorbar(image, ax=ax, shrink=0.8)
+        bar.set_label(f"{grid.third_name}, this map's range", fontsize=7)
+
+
+def tuning_figure(scenario: str, controller: str, grid: TuningGrid, unplaced: int = 0) -> Figure:
+    """Outcome, min clearance (fixed scale) and time to goal or RMSE maps of one grid, side by side;
+    unplaced runs (no N or gamma) are counted in the title."""
     panel_width_in = 1.8 + 0.75 * len(grid.horizons)
     height_in = 2.9 + 0.4 * len(grid.gammas)
     fig, axes = plt.subplots(1, 3, figsize=(3 * panel_width_in + 1.5, height_in), layout="constrained")
     fig.get_layout_engine().set(wspace=0.06)
     _outcome_map(axes[0], grid)
-    _value_map(axes[1], grid.min_clearance_m, "min clearance (m)", "RdYlGn", ".3f")
-    third_format = ".2f" if "RMSE" in grid.third_name else ".1f"
-    _value_map(axes[2], grid.third, grid.third_name, "viridis_r", third_format)
+    _clearance_map(axes[1], grid)
+    _third_map(axes[2], grid)
     for ax in axes[1:]:
         _grid_axes(ax, grid)
     title = f"{scenario}: {controller}"
@@ -959,6 +1160,6 @@ def plot_tuning_maps(
             placed = [r for r in runs if _placeable(r)]
             if not placed:
                 continue
-            figure = _tuning_figure(name, controller, tuning_grid(placed), len(runs) - len(placed))
+            figure = tuning_figure(name, controller, tuning_grid(placed), len(runs) - len(placed))
             written[f"{name}/{controller}"] = _save(figure, out, _stem(f"tuning_{name}_{controller}"))
     return written

@@ -9,8 +9,14 @@ with one line when the plugin does not load, `tiny` never tries EGL. PyBullet's 
 drawn by `getCameraImage`, so the ground-level overlays are projected with the camera's matrices
 and drawn with Pillow: the reference path and the trail driven so far are kept only where the
 rendered surface under them is the ground (depth test), so the robot and obstacles hide them; the
-NMPC's predicted states at the current control step are drawn over everything (a short plan lies
-mostly under the robot's own body).
+NMPC's predicted states at the current control step and the controller's robot circle (the
+trace's `robot_radius_m`, dashed, around the robot) are drawn over everything (a short plan lies
+mostly under the robot's own body). The goal is a flat green disc with a dark green arrow along the
+goal yaw (visual shapes with rgbaColor). Each frame then gets a caption (sim time, the run's outcome
+from its summary.json, scenario, controller, N), a legend, and in the top view a scale bar whose
+length in px comes from the camera's projection. The EGL plugin's banners ("EGL device choice"
+on stderr, GL vendor lines on stdout) are sent to /dev/null at the file-descriptor level; whether
+it loaded is read from loadPlugin's return value.
 
 Frames: frame i shows sim time t_i = i / fps for i = 0, 1, ... while t_i <= t_end (the last
 trace sample), so a run of T s at F frames/s gives floor(T * F) + 1 frames, played back in real
@@ -42,28 +48,39 @@ from pathlib import Path
 
 import imageio_ffmpeg
 import numpy as np
-import pybullet as p
 import pybullet_data
 from PIL import Image, ImageDraw, ImageFont
 
+from husky_sim.bullet import pybullet as p
 from husky_sim.robot_geometry import DEFAULT_URDF
 from husky_sim.trace import EpisodeTrace
 
 CAMERAS = ("top", "chase", "both")
 RENDERERS = ("auto", "egl", "tiny")
 
-#: RGB colours of the drawn items (the Husky's own yellow, 0.95 0.75 0.05, is used by nothing else).
+#: RGB colours of the drawn items (the Husky's own yellow, 0.95 0.75 0.05, is used by nothing else
+#: in the scene; only the legend's robot swatch repeats it).
+HUSKY_RGB = (242, 191, 13)
 REFERENCE_RGB = (0, 150, 60)
 TRAIL_RGB = (20, 40, 170)
 PREDICTION_RGB = (215, 0, 200)
-GOAL_RGBA = (0.0, 0.65, 0.25, 1.0)
+SAFETY_RGB = (225, 20, 40)  # the controller's robot circle, dashed
+GOAL_RGBA = (0.0, 0.8, 0.2, 1.0)
+GOAL_ARROW_RGBA = (0.0, 0.4, 0.1, 1.0)
 STATIC_OBSTACLE_RGBA = (0.25, 0.25, 0.25, 1.0)  # as husky_sim.world
 MOVING_OBSTACLE_RGBA = (0.8, 0.3, 0.2, 1.0)
 WALL_RGBA = (0.55, 0.55, 0.6, 1.0)
 
+#: The goal marker: a flat disc (radius, thickness in m) and an arrow along the goal yaw (length m).
+GOAL_DISC_RADIUS_M = 0.3
+GOAL_DISC_THICKNESS_M = 0.03
+GOAL_ARROW_LENGTH_M = 0.7
+
 _OVERLAY_Z_M = 0.02  # height of the drawn paths above the ground (m)
 _GROUND_Z_M = 0.06  # a pixel whose surface is below this height (m) counts as ground for overlays
-_NEAR_M = 0.1  # near clipping distance of both cameras (m)
+_NEAR_M = 0.1  # near clipping distance of the chase camera (m)
+_TALLEST_M = 1.0  # the top camera's near plane stays this far above the robot and the walls (m)
+_SAFETY_CIRCLE_POINTS = 64  # polyline points of the drawn safety circle (every other gap is a dash)
 
 
 class RenderError(ValueError):
@@ -145,12 +162,14 @@ def frame_times(t_end_s: float, fps: float) -> np.ndarray:
 
 @dataclass(frozen=True)
 class Camera:
-    """A pinhole camera: PyBullet's column-major view and projection matrices and its image size."""
+    """A pinhole camera: PyBullet's column-major view and projection matrices, its image size (px)
+    and the near plane distance (m) its projection was built with."""
 
     view: tuple[float, ...]
     projection: tuple[float, ...]
     width: int
     height: int
+    near_m: float = _NEAR_M
 
     @property
     def matrix(self) -> np.ndarray:
@@ -167,10 +186,11 @@ def _camera(
     far_m: float,
     width: int,
     height: int,
+    near_m: float = _NEAR_M,
 ) -> Camera:
     view = p.computeViewMatrix(eye.tolist(), target.tolist(), list(up))
-    proj = p.computeProjectionMatrixFOV(fov_deg, width / height, _NEAR_M, far_m)
-    return Camera(tuple(view), tuple(proj), width, height)
+    proj = p.computeProjectionMatrixFOV(fov_deg, width / height, near_m, far_m)
+    return Camera(tuple(view), tuple(proj), width, height, near_m)
 
 
 def scene_bounds(trace: EpisodeTrace) -> tuple[np.ndarray, np.ndarray]:
@@ -190,18 +210,48 @@ def scene_bounds(trace: EpisodeTrace) -> tuple[np.ndarray, np.ndarray]:
 
 
 def top_camera(trace: EpisodeTrace, options: RenderOptions) -> Camera:
-    """Fixed camera straight above the scene's centre, high enough to frame the whole episode."""
+    """Fixed camera straight above the scene's centre, high enough to frame the whole episode.
+
+    Its near plane sits just above the tallest thing in the scene, not at 0.1 m: the EGL depth
+    buffer's resolution scales with near / distance^2, and with a 0.1 m near plane 20 m up the
+    ground and the goal disc a few cm above it z-fight (the disc came out as grey stripes).
+    """
     lo, hi = scene_bounds(trace)
     centre = 0.5 * (lo + hi)
     half_x, half_y = np.maximum(0.5 * (hi - lo) + options.margin_m, 1.5)
     tan_half = math.tan(math.radians(options.top_fov_deg) / 2)
     aspect = options.width / options.height
-    height_m = max(half_y / tan_half, half_x / (tan_half * aspect)) + 1.0  # from the obstacles' tops
+    tallest_m = max([_TALLEST_M, *trace.obstacle_height_m.tolist()])
+    height_m = max(half_y / tan_half, half_x / (tan_half * aspect)) + tallest_m
+    near_m = max(_NEAR_M, height_m - tallest_m - 1.0)
     eye = np.array([centre[0], centre[1], height_m])
     target = np.array([centre[0], centre[1], 0.0])
     return _camera(
-        eye, target, (0.0, 1.0, 0.0), options.top_fov_deg, height_m + 1.0, options.width, options.height
+        eye,
+        target,
+        (0.0, 1.0, 0.0),
+        options.top_fov_deg,
+        height_m + 1.0,
+        options.width,
+        options.height,
+        near_m,
     )
+
+
+def ground_pixels_per_m(camera: Camera, xy_m: np.ndarray) -> float:
+    """Image scale (px per m) on the ground at xy_m (m), from the camera's projection: the pixel
+    distance between xy_m and a point 1 m from it along x. Uniform over the top camera's view."""
+    points = np.array([xy_m[:2], xy_m[:2] + np.array([1.0, 0.0])], dtype=float)
+    pieces = project_polyline(camera, points, 0.0)
+    if len(pieces) != 1 or len(pieces[0]) != 2:
+        return math.nan
+    (x0, y0), (x1, y1) = pieces[0]
+    return math.hypot(x1 - x0, y1 - y0)
+
+
+def camera_eye_m(camera: Camera) -> np.ndarray:
+    """(3,) position (m) of the camera in the world, from its view matrix."""
+    return np.linalg.inv(np.asarray(camera.view).reshape(4, 4).T)[:3, 3]
 
 
 def chase_camera(xy_m: np.ndarray, heading_rad: float, options: RenderOptions) -> Camera:
@@ -233,6 +283,39 @@ def _yaw(quat_xyzw: np.ndarray) -> float:
     return math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
 
 
+# ------------------------------------------------------------------------------------- what is drawn
+
+
+def moving_obstacle_mask(trace: EpisodeTrace) -> np.ndarray:
+    """(M,) bool: obstacles whose recorded centre moves at all."""
+    xy = trace.obstacle_xy_m
+    if xy.shape[0] == 0 or xy.shape[1] == 0:
+        return np.zeros(xy.shape[1], dtype=bool)
+    return np.ptp(xy, axis=0).max(axis=1) > 1e-9
+
+
+def drawn_reference(trace: EpisodeTrace) -> np.ndarray | None:
+    """(P, 2) reference path (m) drawn on the ground, or None for a set point (a single point)."""
+    ref = trace.reference_path[:, :2]
+    if len(ref) > 1 and np.ptp(ref, axis=0).max() > 0.01:
+        return ref
+    return None
+
+
+def safety_radius_m(trace: EpisodeTrace) -> float:
+    """The controller's robot circle (m) drawn around the robot; the URDF footprint if unrecorded."""
+    radius = float(trace.robot_radius_m)
+    return radius if math.isfinite(radius) and radius > 0 else float(trace.footprint_radius_m)
+
+
+def circle_points_m(
+    centre_xy_m: np.ndarray, radius_m: float, count: int = _SAFETY_CIRCLE_POINTS
+) -> np.ndarray:
+    """(count + 1, 2) closed polyline (m) of the circle of radius_m around centre_xy_m."""
+    angle = np.linspace(0.0, 2.0 * math.pi, count + 1)
+    return centre_xy_m[:2] + radius_m * np.column_stack([np.cos(angle), np.sin(angle)])
+
+
 # -------------------------------------------------------------------------------------------- overlays
 
 
@@ -242,7 +325,7 @@ def project_polyline(camera: Camera, xy_m: np.ndarray, z_m: float) -> list[list[
         return []
     world = np.column_stack([xy_m, np.full(len(xy_m), z_m), np.ones(len(xy_m))])
     clip = world @ camera.matrix.T
-    front = clip[:, 3] >= _NEAR_M
+    front = clip[:, 3] >= camera.near_m
     if front.all():
         return [_to_pixels(camera, clip)]
     edges = np.flatnonzero(np.diff(np.concatenate([[0], front.astype(np.int8), [0]])))
@@ -250,16 +333,16 @@ def project_polyline(camera: Camera, xy_m: np.ndarray, z_m: float) -> list[list[
     for start, end in zip(edges[::2], edges[1::2], strict=True):  # runs [start, end) in front
         run = [clip[start:end]]
         if start > 0:
-            run.insert(0, _near_cut(clip[start - 1], clip[start]))
+            run.insert(0, _near_cut(clip[start - 1], clip[start], camera.near_m))
         if end < len(clip):
-            run.append(_near_cut(clip[end - 1], clip[end]))
+            run.append(_near_cut(clip[end - 1], clip[end], camera.near_m))
         pieces.append(_to_pixels(camera, np.vstack(run)))
     return pieces
 
 
-def _near_cut(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """The point (clip coordinates) where segment a-b crosses the near plane w = _NEAR_M."""
-    s = (_NEAR_M - a[3]) / (b[3] - a[3])
+def _near_cut(a: np.ndarray, b: np.ndarray, near_m: float) -> np.ndarray:
+    """The point (clip coordinates) where segment a-b crosses the near plane w = near_m."""
+    s = (near_m - a[3]) / (b[3] - a[3])
     return (a + s * (b - a))[None, :]
 
 
@@ -297,13 +380,17 @@ class GroundPath:
     width_px: int
     dots: bool = False
     on_top: bool = False
+    dashed: bool = False  # draw every other segment only
 
 
 def _draw_paths(draw: ImageDraw.ImageDraw, camera: Camera, paths: list[GroundPath]) -> None:
     for path in paths:
         fill = (*path.rgb, 255)
         for line in project_polyline(camera, path.xy_m, _OVERLAY_Z_M):
-            if len(line) > 1:
+            if len(line) > 1 and path.dashed:
+                for a, b in zip(line[:-1:2], line[1::2], strict=False):
+                    draw.line([a, b], fill=fill, width=path.width_px)
+            elif len(line) > 1:
                 joint = "curve" if len(line) <= 64 else None  # round joints cost ~6 us each in Pillow
                 draw.line(line, fill=fill, width=path.width_px, joint=joint)
             if path.dots:
@@ -331,45 +418,195 @@ def draw_overlays(rgb: np.ndarray, depth: np.ndarray, camera: Camera, paths: lis
     return np.asarray(image)
 
 
-def _font(height_px: int) -> ImageFont.ImageFont | ImageFont.FreeTypeFont:
+Font = ImageFont.ImageFont | ImageFont.FreeTypeFont
+
+
+def _font(height_px: int, lines_per_frame: int = 30) -> Font:
+    """Pillow's default font, about height_px / lines_per_frame px high (at least 10 px)."""
     try:
-        return ImageFont.load_default(size=max(10, height_px // 30))
+        return ImageFont.load_default(size=max(10, height_px // lines_per_frame))
     except (TypeError, OSError):  # a Pillow without FreeType
         return ImageFont.load_default()
 
 
-def draw_caption(
-    frame: np.ndarray, text: str, font: ImageFont.ImageFont | ImageFont.FreeTypeFont
-) -> np.ndarray:
-    """The frame (H, W, 3) with `text` in a dark box at its top left corner."""
+def frame_caption(t_s: float, run_text: str = "", outcome: str = "") -> str:
+    """Caption of the frame at sim time t_s (s): "t =  1.20 s   run outcome: stuck", then the run
+    (scenario, controller, N) on a second line; parts left empty are left out."""
+    text = f"t = {t_s:5.2f} s"
+    if outcome:
+        text += f"   run outcome: {outcome}"
+    return f"{text}\n{run_text}" if run_text else text
+
+
+def draw_caption(frame: np.ndarray, text: str, font: Font) -> np.ndarray:
+    """The frame (H, W, 3) with `text` (one or more lines) in a dark box at its top left corner;
+    the frame as it is for empty text."""
+    if not text:
+        return frame
     image = Image.fromarray(frame)
     draw = ImageDraw.Draw(image)
-    box = draw.textbbox((8, 6), text, font=font)
+    box = draw.multiline_textbbox((8, 6), text, font=font)
     draw.rectangle((box[0] - 4, box[1] - 3, box[2] + 4, box[3] + 3), fill=(0, 0, 0))
-    draw.text((8, 6), text, fill=(255, 255, 255), font=font)
+    draw.multiline_text((8, 6), text, fill=(255, 255, 255), font=font)
     return np.asarray(image)
+
+
+@dataclass(frozen=True)
+class LegendEntry:
+    """One legend item: its text, its colour and its symbol: "box", "disc", "line", "dots" or "ring"."""
+
+    label: str
+    rgb: tuple[int, int, int]
+    symbol: str
+
+
+def _rgb(rgba: tuple[float, ...]) -> tuple[int, int, int]:
+    """0..255 RGB of a 0..1 RGBA colour."""
+    r, g, b = (round(255 * c) for c in rgba[:3])
+    return r, g, b
+
+
+def legend_entries(trace: EpisodeTrace) -> list[LegendEntry]:
+    """What the frames of this trace show, in legend order."""
+    entries = [
+        LegendEntry("robot", HUSKY_RGB, "box"),
+        LegendEntry("obstacle", _rgb(STATIC_OBSTACLE_RGBA), "disc"),
+    ]
+    if moving_obstacle_mask(trace).any():
+        entries.append(LegendEntry("moving obstacle", _rgb(MOVING_OBSTACLE_RGBA), "disc"))
+    if np.all(np.isfinite(trace.goal)):
+        entries.append(LegendEntry("goal", _rgb(GOAL_RGBA), "disc"))
+    if drawn_reference(trace) is not None:
+        entries.append(LegendEntry("reference", REFERENCE_RGB, "line"))
+    entries += [
+        LegendEntry("plan (NMPC)", PREDICTION_RGB, "dots"),
+        LegendEntry("trail", TRAIL_RGB, "line"),
+        LegendEntry(f"safety circle r={safety_radius_m(trace):.2f} m", SAFETY_RGB, "ring"),
+    ]
+    return entries
+
+
+def _draw_symbol(draw: ImageDraw.ImageDraw, box: tuple[int, int, int, int], entry: LegendEntry) -> None:
+    """entry's symbol inside the square box (x0, y0, x1, y1) px."""
+    x0, y0, x1, y1 = box
+    mid = (y0 + y1) / 2
+    width_px = max(2, (y1 - y0) // 5)
+    if entry.symbol == "box":
+        draw.rectangle((x0, y0 + 2, x1, y1 - 2), fill=entry.rgb, outline=(40, 40, 40))
+    elif entry.symbol == "disc":
+        draw.ellipse(box, fill=entry.rgb)
+    elif entry.symbol == "ring":
+        draw.ellipse(box, outline=entry.rgb, width=width_px)
+    else:  # a line, with dots at its ends and middle for "dots"
+        draw.line((x0, mid, x1, mid), fill=entry.rgb, width=width_px)
+        if entry.symbol == "dots":
+            r = width_px + 1
+            for x in (x0 + r, (x0 + x1) / 2, x1 - r):
+                draw.ellipse((x - r, mid - r, x + r, mid + r), fill=entry.rgb)
+
+
+def legend_image(entries: list[LegendEntry], font: Font, max_width_px: int) -> Image.Image:
+    """An RGBA legend (symbol, then text, per entry) on a translucent white box, entries flowing
+    left to right in rows no wider than max_width_px."""
+    probe = ImageDraw.Draw(Image.new("RGBA", (1, 1)))
+    line_px = int(probe.textbbox((0, 0), "Ag", font=font)[3]) + 2
+    pad, gap = 4, line_px // 2
+    widths = [line_px + gap // 2 + int(probe.textlength(e.label, font=font)) for e in entries]
+    rows: list[list[int]] = [[]]
+    for n, width in enumerate(widths):
+        used = sum(widths[i] + gap for i in rows[-1])
+        if rows[-1] and used + width > max_width_px - 2 * pad:
+            rows.append([])
+        rows[-1].append(n)
+    width_px = 2 * pad + max(sum(widths[i] + gap for i in row) - gap for row in rows)
+    image = Image.new("RGBA", (width_px, 2 * pad + len(rows) * line_px), (255, 255, 255, 210))
+    draw = ImageDraw.Draw(image)
+    size = line_px - 4  # of a symbol's square
+    for r, row in enumerate(rows):
+        x, y = pad, pad + r * line_px
+        for n in row:
+            _draw_symbol(draw, (x, y + 2, x + size, y + 2 + size), entries[n])
+            draw.text((x + line_px + gap // 2 - 2, y), entries[n].label, fill=(0, 0, 0), font=font)
+            x += widths[n] + gap
+    return image
+
+
+def paste_legend(frame: np.ndarray, legend: Image.Image, border_px: int = 6) -> np.ndarray:
+    """frame (H, W, 3) with the RGBA legend blended into its bottom right corner."""
+    image = Image.fromarray(frame)
+    corner = (frame.shape[1] - legend.width - border_px, frame.shape[0] - legend.height - border_px)
+    image.paste(legend, corner, legend)
+    return np.asarray(image)
+
+
+#: Scale bar lengths (m) to choose from.
+SCALE_BAR_LENGTHS_M = (0.1, 0.2, 0.5, 1.0, 2.0, 5.0, 10.0, 20.0, 50.0, 100.0)
+
+
+def scale_bar_length_m(pixels_per_m: float, max_px: float) -> float:
+    """The longest of SCALE_BAR_LENGTHS_M that spans at most max_px px (the shortest if none does)."""
+    fitting = [length for length in SCALE_BAR_LENGTHS_M if length * pixels_per_m <= max_px]
+    return fitting[-1] if fitting else SCALE_BAR_LENGTHS_M[0]
+
+
+def draw_scale_bar(frame: np.ndarray, camera: Camera, font: Font, border_px: int = 6) -> np.ndarray:
+    """frame (H, W, 3) of the top camera with a scale bar at its bottom left corner: a length in m
+    drawn at the ground scale (px per m) the camera's projection gives under its eye."""
+    pixels_per_m = ground_pixels_per_m(camera, camera_eye_m(camera)[:2])
+    if not math.isfinite(pixels_per_m) or pixels_per_m <= 0:
+        return frame
+    length_m = scale_bar_length_m(pixels_per_m, 0.2 * camera.width)
+    length_px = round(length_m * pixels_per_m)
+    image = Image.fromarray(frame)
+    draw = ImageDraw.Draw(image, "RGBA")
+    label = f"{length_m:g} m"
+    left, top, right, bottom = (int(v) for v in draw.textbbox((0, 0), label, font=font))
+    bar_px, pad = max(3, camera.height // 120), 5
+    box_w = max(length_px, right - left) + 2 * pad
+    box_h = pad + (bottom - top) + 2 + 2 * bar_px + pad  # label, gap, ticks above the bar, bar
+    x0, y0 = border_px, frame.shape[0] - border_px - box_h
+    draw.rectangle((x0, y0, x0 + box_w, y0 + box_h), fill=(255, 255, 255, 210))
+    bar_x0, bar_y0 = x0 + pad, y0 + box_h - pad - bar_px
+    draw.rectangle((bar_x0, bar_y0, bar_x0 + length_px, bar_y0 + bar_px), fill=(0, 0, 0))
+    for x in (bar_x0, bar_x0 + length_px):  # end ticks, up from the bar
+        draw.rectangle((x - 1, bar_y0 - bar_px, x + 1, bar_y0 + bar_px), fill=(0, 0, 0))
+    text_x = bar_x0 + max(0, (length_px - (right - left)) // 2) - left
+    draw.text((text_x, y0 + pad - top), label, fill=(0, 0, 0), font=font)
+    return np.asarray(image)
+
+
+def annotate_frame(frame: np.ndarray, caption: str, font: Font, legend: Image.Image | None) -> np.ndarray:
+    """A video frame with its caption (top left) and the legend (bottom right)."""
+    frame = draw_caption(frame, caption, font)
+    return frame if legend is None else paste_legend(frame, legend)
 
 
 # ----------------------------------------------------------------------------------------------- scene
 
 
 @contextlib.contextmanager
-def _quiet_stdout() -> Iterator[None]:
-    """Send what C code prints on file descriptor 1 (the EGL plugin's banners) to /dev/null."""
+def _quiet_fds(*fds: int) -> Iterator[None]:
+    """Send what C code writes on the file descriptors fds (1: stdout, 2: stderr) to /dev/null,
+    and restore them afterwards. The EGL plugin prints its GL banners on 1 and "EGL device
+    choice: ..." on 2; whether it loaded comes back as loadPlugin's return value, not as text."""
     sys.stdout.flush()
-    _flush_c_stdout()
-    saved = os.dup(1)
+    sys.stderr.flush()
+    _flush_c_stdio()
+    saved: list[tuple[int, int]] = []
     try:
         with open(os.devnull, "wb") as null:
-            os.dup2(null.fileno(), 1)
+            for fd in fds:
+                saved.append((fd, os.dup(fd)))
+                os.dup2(null.fileno(), fd)
         yield
     finally:
-        _flush_c_stdout()  # C stdio buffers a pipe's output: flush it while it still goes to /dev/null
-        os.dup2(saved, 1)
-        os.close(saved)
+        _flush_c_stdio()  # C stdio buffers a pipe's output: flush it while it still goes to /dev/null
+        for fd, copy in saved:
+            os.dup2(copy, fd)
+            os.close(copy)
 
 
-def _flush_c_stdout() -> None:
+def _flush_c_stdio() -> None:
     with contextlib.suppress(OSError, AttributeError):
         ctypes.CDLL(None).fflush(None)
 
@@ -398,7 +635,7 @@ class Scene:
         if spec is None or spec.origin is None:
             reason = "the eglRenderer module is not installed with pybullet"
         else:
-            with _quiet_stdout():
+            with _quiet_fds(1, 2):
                 self._egl_plugin = p.loadPlugin(
                     spec.origin, "_eglRendererPlugin", physicsClientId=self.client
                 )
@@ -418,7 +655,7 @@ class Scene:
         p.loadURDF(ground, physicsClientId=cid)
         self.robot = p.loadURDF(str(DEFAULT_URDF), flags=p.URDF_USE_INERTIA_FROM_FILE, physicsClientId=cid)
         xy = trace.obstacle_xy_m
-        moving = np.ptp(xy, axis=0).max(axis=1) > 1e-9 if len(xy) else np.zeros(0, bool)
+        moving = moving_obstacle_mask(trace)
         self.obstacles: list[tuple[int, float, bool]] = []
         for j, (radius, height) in enumerate(
             zip(trace.obstacle_radius_m, trace.obstacle_height_m, strict=True)
@@ -457,12 +694,25 @@ class Scene:
         )
 
     def _goal_marker(self, goal: np.ndarray) -> None:
-        """A flat green disc of the goal position tolerance's size and an arrow along the goal yaw."""
+        """A flat green disc at the goal and a darker green arrow along the goal yaw, all visual
+        shapes coloured through rgbaColor (getCameraImage draws no debug lines)."""
         x, y, yaw = (float(v) for v in goal)
-        self._visual(p.GEOM_CYLINDER, GOAL_RGBA, [x, y, 0.005], radius=0.15, length=0.01)
-        tip = [x + 0.3 * math.cos(yaw), y + 0.3 * math.sin(yaw), 0.01]
-        quat = p.getQuaternionFromEuler([0, 0, yaw])
-        self._visual(p.GEOM_BOX, GOAL_RGBA, tip, quat, halfExtents=[0.3, 0.03, 0.01])
+        thick = GOAL_DISC_THICKNESS_M
+        self._visual(p.GEOM_CYLINDER, GOAL_RGBA, [x, y, thick / 2], radius=GOAL_DISC_RADIUS_M, length=thick)
+        centre, z = np.array([x, y]), thick + 0.01  # the arrow lies on the disc
+        tip = centre + GOAL_ARROW_LENGTH_M * np.array([math.cos(yaw), math.sin(yaw)])
+        self._bar(centre, yaw, GOAL_ARROW_LENGTH_M, z)
+        for side in (1.0, -1.0):  # the head: two strokes back from the tip
+            self._bar(tip, yaw + side * 0.8 * math.pi, 0.35 * GOAL_ARROW_LENGTH_M, z)
+
+    def _bar(self, start_xy_m: np.ndarray, angle_rad: float, length_m: float, z_m: float) -> None:
+        """A flat bar of the goal arrow from start_xy_m, length_m long along angle_rad."""
+        direction = np.array([math.cos(angle_rad), math.sin(angle_rad)])
+        middle = start_xy_m + 0.5 * length_m * direction
+        quat = p.getQuaternionFromEuler([0, 0, angle_rad])
+        width_m = 0.1 * GOAL_ARROW_LENGTH_M
+        extents = [0.5 * length_m + 0.5 * width_m, 0.5 * width_m, 0.01]
+        self._visual(p.GEOM_BOX, GOAL_ARROW_RGBA, [*middle, z_m], quat, halfExtents=extents)
 
     def _walls(self, half: float) -> None:
         """The arena's four walls, placed as husky_sim.world places them (0.1 m thick, 0.5 m high)."""
@@ -486,7 +736,7 @@ class Scene:
     def image(self, camera: Camera) -> tuple[np.ndarray, np.ndarray]:
         """RGB (H, W, 3) uint8 and depth buffer (H, W) float32 of the scene as posed."""
         flag = p.ER_BULLET_HARDWARE_OPENGL if self.renderer == "egl" else p.ER_TINY_RENDERER
-        quiet = _quiet_stdout() if self._noisy_images > 0 else contextlib.nullcontext()
+        quiet = _quiet_fds(1) if self._noisy_images > 0 else contextlib.nullcontext()
         with quiet:
             _, _, rgba, depth, _ = p.getCameraImage(
                 camera.width,
@@ -506,7 +756,7 @@ class Scene:
     def close(self) -> None:
         if not p.isConnected(self.client):
             return
-        with _quiet_stdout():
+        with _quiet_fds(1):  # "Destroy EGL OpenGL window."
             if self._egl_plugin >= 0:
                 p.unloadPlugin(self._egl_plugin, physicsClientId=self.client)
             p.disconnect(self.client)
@@ -515,27 +765,38 @@ class Scene:
 # ---------------------------------------------------------------------------------------------- render
 
 
-def _frame(scene: Scene, camera: Camera, t_s: float, width_px: int) -> np.ndarray:
-    """One camera view (H, W, 3) at sim time t_s: the scene plus reference, trail and prediction."""
+def camera_view(scene: Scene, camera: Camera, t_s: float, width_px: int) -> np.ndarray:
+    """One camera view (H, W, 3) at sim time t_s: the scene plus reference, trail, prediction and
+    the controller's robot circle (dashed) around the robot, in lines width_px px wide."""
     trace = scene.trace
     rgb, depth = scene.image(camera)
     sample = trace.pose_index(t_s)
     paths: list[GroundPath] = []
-    ref = trace.reference_path[:, :2]
-    if len(ref) > 1 and np.ptp(ref, axis=0).max() > 0.01:  # a set point's reference is one point
+    ref = drawn_reference(trace)
+    if ref is not None:
         paths.append(GroundPath(ref, REFERENCE_RGB, width_px))
     paths.append(GroundPath(trace.base_position_m[: sample + 1, :2], TRAIL_RGB, width_px))
     if len(trace.control_t_s) and trace.control_t_s[0] <= t_s + 1e-9:
         plan = trace.predicted_states[trace.control_index(t_s)][:, :2]
         plan = plan[np.all(np.isfinite(plan), axis=1)]
         paths.append(GroundPath(plan, PREDICTION_RGB, max(1, width_px - 1), dots=True, on_top=True))
+    circle = circle_points_m(trace.base_position_m[sample, :2], safety_radius_m(trace))
+    paths.append(GroundPath(circle, SAFETY_RGB, max(2, width_px - 1), on_top=True, dashed=True))
     return draw_overlays(rgb, depth, camera, paths)
 
 
 def render_trace(
-    trace: EpisodeTrace, out_file: Path, options: RenderOptions | None = None, caption: str = ""
+    trace: EpisodeTrace,
+    out_file: Path,
+    options: RenderOptions | None = None,
+    caption: str = "",
+    outcome: str = "",
 ) -> RenderResult:
-    """Render a trace to an H.264 MP4 at out_file (written whole, then moved into place)."""
+    """Render a trace to an H.264 MP4 at out_file (written whole, then moved into place).
+
+    Every frame carries the sim time, the run's outcome (when given) and caption at its top left,
+    a legend at its bottom right and, in the top view, a scale bar in m at its bottom left.
+    """
     options = options or RenderOptions()
     _check_trace(trace)
     out_file = Path(out_file)
@@ -545,7 +806,8 @@ def render_trace(
     partial = out_file.with_name(out_file.stem + ".partial.mp4")
     times = frame_times(float(trace.sample_t_s[-1]), options.fps)
     width_px = max(2, round(options.height / 150))
-    font = _font(options.height)
+    font, small_font = _font(options.height), _font(options.height, lines_per_frame=45)
+    legend = legend_image(legend_entries(trace), small_font, int(0.6 * options.width))  # within one view
     start = time.perf_counter()
     scene = Scene(trace, options.renderer)
     try:
@@ -572,13 +834,14 @@ def render_trace(
                 scene.pose(trace.pose_index(t))
                 views = []
                 if top is not None:
-                    views.append(_frame(scene, top, t, width_px))
+                    views.append(draw_scale_bar(camera_view(scene, top, t, width_px), top, small_font))
                 if headings is not None:
                     xy = trace.base_position_m[trace.pose_index(t), :2]
-                    views.append(_frame(scene, chase_camera(xy, float(headings[i]), options), t, width_px))
+                    views.append(
+                        camera_view(scene, chase_camera(xy, float(headings[i]), options), t, width_px)
+                    )
                 frame = views[0] if len(views) == 1 else np.concatenate(views, axis=1)
-                text = f"t = {t:5.2f} s" + (f"   {caption}" if caption else "")
-                writer.send(draw_caption(frame, text, font))
+                writer.send(annotate_frame(frame, frame_caption(t, caption, outcome), font, legend))
         finally:
             writer.close()
     except BaseException:
@@ -641,13 +904,28 @@ def load_run_trace(run_dir: Path) -> EpisodeTrace:
     return trace
 
 
-def run_caption(run_dir: Path) -> str:
-    """'scenario controller N=..' from the run's summary.json, or '' if it has none readable."""
+def _read_summary(run_dir: Path) -> dict[str, object]:
+    """The run's summary.json, or {} when it has none readable."""
     try:
         summary = json.loads((Path(run_dir) / "summary.json").read_text())
+    except (OSError, ValueError):
+        return {}
+    return summary if isinstance(summary, dict) else {}
+
+
+def run_caption(run_dir: Path) -> str:
+    """'scenario controller N=..' from the run's summary.json, or '' if it has none readable."""
+    summary = _read_summary(run_dir)
+    try:
         return f"{summary['scenario']}  {summary['controller']}  N={summary['horizon']}"
-    except (OSError, ValueError, KeyError, TypeError):
+    except KeyError:
         return ""
+
+
+def run_outcome(run_dir: Path) -> str:
+    """The run's outcome ("reached", "stuck", ...) from its summary.json, or '' if unknown."""
+    outcome = _read_summary(run_dir).get("outcome")
+    return str(outcome) if outcome else ""
 
 
 def default_video_file(run_dir: Path, camera: str) -> Path:
@@ -661,7 +939,7 @@ def render_run(
     options = options or RenderOptions()
     trace = load_run_trace(run_dir)
     out = Path(out_file) if out_file is not None else default_video_file(run_dir, options.camera)
-    return render_trace(trace, out, options, caption=run_caption(run_dir))
+    return render_trace(trace, out, options, caption=run_caption(run_dir), outcome=run_outcome(run_dir))
 
 
 def record_in_summary(run_dir: Path, result: RenderResult) -> None:

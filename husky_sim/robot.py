@@ -10,8 +10,8 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-import pybullet as p
 
+from husky_sim.bullet import pybullet as p
 from husky_sim.robot_geometry import DEFAULT_URDF, RobotGeometry, load_geometry
 
 

@@ -3,18 +3,57 @@
 from __future__ import annotations
 
 import json
+import re
+import signal
 from pathlib import Path
 
 from controllers import NMPCController, SafetyConstraint
+from husky_sim import interrupts
 from husky_sim.episode import run_episode
+from husky_sim.interrupts import RunInterrupted
 from husky_sim.scenario import Scenario, load_scenario
+
+#: Where runs go unless --out says otherwise.
+RESULTS_DIR = Path("results")
 
 #: Kinematic clearance above -this (m) is contact, not collision: IPOPT meets B = 0 to ~1e-9.
 KINEMATIC_CONTACT_TOL_M = 1e-6
 
 
+def _safe_component(text: str) -> str:
+    """A path component made of [A-Za-z0-9_.+-] that cannot climb out of its parent."""
+    cleaned = re.sub(r"[^A-Za-z0-9_.+-]", "_", text).lstrip(".")
+    return cleaned[:80] or "_"
+
+
 def run_dir_name(scenario: str, controller: str, horizon: int, gamma: float, seed: int) -> str:
-    return f"{scenario}__{controller}__N{horizon}__g{gamma:g}__s{seed}"
+    """The one name of a run's folder: never a path outside its parent, whatever the scenario's
+    name holds (the schema already restricts names; this holds for any caller)."""
+    return _safe_component(f"{scenario}__{controller}__N{horizon}__g{gamma:g}__s{seed}")
+
+
+def default_run_dir(scenario: str, controller: str, horizon: int, gamma: float, seed: int) -> Path:
+    return RESULTS_DIR / run_dir_name(scenario, controller, horizon, gamma, seed)
+
+
+def prepare_out_dir(out_dir: Path) -> Path:
+    """Create the run directory before anything runs; one-line ValueError naming `--out` if it is
+    an existing file, a special file, or cannot be created (too long a name, no permission)."""
+    try:
+        if out_dir.exists() and not out_dir.is_dir():
+            raise ValueError(f"--out: {str(out_dir)[:120]} exists and is not a directory")
+        out_dir.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise ValueError(f"--out: cannot create {str(out_dir)[:120]!r} ({exc.strerror or exc})") from None
+    return out_dir
+
+
+def write_summary(out_dir: Path, summary: dict[str, object]) -> None:
+    """summary.json, written whole even if a signal arrives meanwhile."""
+    with interrupts.deferred():
+        tmp = out_dir / "summary.json.tmp"
+        tmp.write_text(json.dumps(summary, indent=2, allow_nan=False) + "\n")
+        tmp.replace(out_dir / "summary.json")
 
 
 def run_scenario(
@@ -29,15 +68,7 @@ def run_scenario(
     sc = load_scenario(scenario) if isinstance(scenario, str) else scenario
     nmpc_config = sc.controller_config(controller, horizon, gamma)
     episode_config = sc.episode_config(seed)
-    log_path = out_dir / "log.csv" if out_dir is not None else None
-    result = run_episode(
-        NMPCController(nmpc_config),
-        sc.reference_object(),
-        episode_config,
-        log_path,
-        robot_radius_m=nmpc_config.robot_radius_m,
-    )
-    summary: dict[str, object] = {
+    header: dict[str, object] = {
         "scenario": sc.name,
         "controller": controller,
         "horizon": nmpc_config.horizon,
@@ -49,12 +80,31 @@ def run_scenario(
         "v_min_mps": nmpc_config.v_min_mps,
         "v_max_mps": nmpc_config.v_max_mps,
         "omega_max_radps": nmpc_config.omega_max_radps,
-        **result.metrics.as_dict(),
     }
     if out_dir is not None:
-        out_dir.mkdir(parents=True, exist_ok=True)
-        result.trace.save(out_dir / "trace.npz")
-        (out_dir / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
+        prepare_out_dir(out_dir)
+    log_path = out_dir / "log.csv" if out_dir is not None else None
+    try:
+        result = run_episode(
+            NMPCController(nmpc_config),
+            sc.reference_object(),
+            episode_config,
+            log_path,
+            robot_radius_m=nmpc_config.robot_radius_m,
+        )
+    except (RunInterrupted, KeyboardInterrupt) as exc:  # before the first control step
+        signum = exc.signum if isinstance(exc, RunInterrupted) else int(signal.SIGINT)
+        if out_dir is not None:
+            name = signal.Signals(signum).name
+            write_summary(out_dir, {**header, "outcome": "interrupted", "interrupted_by": name, "steps": 0})
+        raise RunInterrupted(signum) from None
+    summary: dict[str, object] = {**header, **result.metrics.as_dict()}
+    if out_dir is not None:
+        with interrupts.deferred():
+            result.trace.save(out_dir / "trace.npz")
+        write_summary(out_dir, summary)
+    if result.interrupted_by is not None:
+        raise RunInterrupted(result.interrupted_by)
     return summary
 
 

@@ -1,57 +1,128 @@
 """Scenario files: a validated YAML schema (pydantic) and its translation into a controller
 configuration, an episode configuration and a reference.
 
-Every value carries its unit in its name. Unknown keys are rejected, and so is a start or goal
-inside an obstacle, before anything runs. Validation errors become one line naming the field
-(ScenarioError).
+Every value carries its unit in its name and must be a finite number within a stated physical
+range (`_real` / `_whole` below say which); types are strict (no bool, string or sexagesimal
+coercion: a number is a number). Unknown keys are rejected, and so are a start or goal inside an
+obstacle, a random field that cannot be placed, and work that would not fit a run (more than
+`MAX_OBSTACLES` obstacles, `MAX_CONTROL_STEPS` control steps or a control period that is not a
+whole number of physics steps), all before anything runs. Validation errors become one line
+naming the field, the allowed range and at most a short excerpt of the value (ScenarioError).
+Command-line overrides (horizon, gamma, seed) are applied by `with_overrides`, which validates
+them with the same schema.
 """
 
 from __future__ import annotations
 
+import json
 import math
+import re
 from pathlib import Path
-from typing import Annotated, Literal
+from typing import Annotated, Any, Literal
 
 import numpy as np
-import yaml
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, ValidationError, model_validator
 
 from controllers import CircleTrajectory, NMPCConfig, Reference, SafetyConstraint, SetPoint
 from husky_sim.drive import DriveConfig
 from husky_sim.episode import EpisodeConfig, Outcomes
 from husky_sim.robot import WheelFriction
 from husky_sim.robot_geometry import load_geometry
+from husky_sim.scenario_file import ScenarioFileError, read_scenario_data
 from husky_sim.sensing import SensingConfig
 from husky_sim.world import ObstacleSpec, WorldConfig
 
 SCENARIO_DIR = Path(__file__).resolve().parent.parent / "scenarios"
 
-Positive = Annotated[float, Field(gt=0)]
-NonNegative = Annotated[float, Field(ge=0)]
+#: Most obstacles in one scenario (explicit plus random): each is a slot in the NLP, and solve
+#: time grows with them (7 obstacles: about 5 ms at N = 5; 1,000: 266 ms).
+MAX_OBSTACLES = 64
+#: Longest episode, in control steps (an hour at tau = 0.1 s).
+MAX_CONTROL_STEPS = 36_000
+#: Largest |x| or |y| of any position (m).
+MAX_COORDINATE_M = 500.0
+#: Scenario names: what a run directory is named after, so no path separators or controls.
+NAME_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9_.+-]{0,79}$"
+#: Most characters of a bad value quoted in an error message.
+EXCERPT_CHARS = 40
+TWO_PI = 2 * math.pi
 
 
 class ScenarioError(ValueError):
     """A scenario that cannot run; the message is one line naming the field."""
 
 
+def _range_text(lo: float, hi: float, unit: str, lo_open: bool) -> str:
+    unit_text = f" {unit}" if unit else ""
+    return f"{'(' if lo_open else '['}{lo:.10g}, {hi:.10g}]{unit_text}"
+
+
+def _real(lo: float, hi: float, unit: str = "", *, lo_open: bool = False) -> Any:
+    """A float field: a number (not a bool or a string), finite, in [lo, hi] (or (lo, hi]); the
+    error names the range."""
+    allowed = f"must be a finite number in {_range_text(lo, hi, unit, lo_open)}"
+
+    def check(value: object) -> float:
+        if isinstance(value, bool) or not isinstance(value, int | float):
+            raise ValueError(allowed)
+        try:
+            number = float(value)
+        except OverflowError:  # an integer beyond any float
+            raise ValueError(allowed) from None
+        if not (math.isfinite(number) and (number > lo if lo_open else number >= lo) and number <= hi):
+            raise ValueError(allowed)
+        return number
+
+    return Annotated[float, BeforeValidator(check)]
+
+
+def _whole(lo: int, hi: int, unit: str = "") -> Any:
+    """An integer field in [lo, hi] (bools and floats such as 5.0 are not integers here)."""
+    allowed = f"must be an integer in {_range_text(lo, hi, unit, False)}"
+
+    def check(value: object) -> int:
+        if isinstance(value, bool) or not isinstance(value, int) or not lo <= value <= hi:
+            raise ValueError(allowed)
+        return value
+
+    return Annotated[int, BeforeValidator(check)]
+
+
+def _name(value: object) -> str:
+    if not isinstance(value, str) or not re.fullmatch(NAME_PATTERN, value):
+        raise ValueError(
+            "must be 1 to 80 letters, digits or _ . + - starting with a letter or digit "
+            "(it names the run's folder, so no path separators, spaces or control characters)"
+        )
+    return value
+
+
+Coordinate = _real(-MAX_COORDINATE_M, MAX_COORDINATE_M, "m")
+Angle = _real(-TWO_PI, TWO_PI, "rad")
+Speed = _real(-5.0, 5.0, "m/s")
+Weight = _real(0.0, 1e6, lo_open=True)
+ObstacleRadius = _real(0.0, 20.0, "m", lo_open=True)
+Seed = _whole(0, 2**32 - 1)
+
+
 class _Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True)
+    model_config = ConfigDict(extra="forbid", frozen=True, strict=True)
 
 
 class Pose(_Strict):
-    x_m: float
-    y_m: float
-    yaw_rad: float = 0.0
+    x_m: Coordinate
+    y_m: Coordinate
+    yaw_rad: Angle = 0.0
 
 
 class Circle(_Strict):
     """Reference circle p(t) = c + R [cos(w t + phi), sin(w t + phi)]."""
 
-    radius_m: Positive
-    angular_rate_radps: float = Field(allow_inf_nan=False)
-    center_x_m: float = 0.0
-    center_y_m: float = 0.0
-    phase_rad: float = 0.0
+    radius_m: _real(0.0, 100.0, "m", lo_open=True)
+    angular_rate_radps: _real(-2.0, 2.0, "rad/s")
+    center_x_m: Coordinate = 0.0
+    center_y_m: Coordinate = 0.0
+    phase_rad: Angle = 0.0
 
     @model_validator(mode="after")
     def _nonzero_rate(self) -> Circle:
@@ -76,15 +147,15 @@ class ReferenceSpec(_Strict):
 class ObstacleEntry(_Strict):
     """A cylinder; motion as (vx, vy), or as the paper's (heading, speed), or waypoints."""
 
-    x_m: float
-    y_m: float
-    radius_m: Positive
-    height_m: Positive = 1.0
-    vx_mps: float = 0.0
-    vy_mps: float = 0.0
-    heading_rad: float | None = None
-    speed_mps: NonNegative | None = None
-    waypoints: list[tuple[float, float]] = Field(default_factory=list)
+    x_m: Coordinate
+    y_m: Coordinate
+    radius_m: ObstacleRadius
+    height_m: _real(0.0, 10.0, "m", lo_open=True) = 1.0
+    vx_mps: Speed = 0.0
+    vy_mps: Speed = 0.0
+    heading_rad: Angle | None = None
+    speed_mps: _real(0.0, 5.0, "m/s") | None = None
+    waypoints: list[tuple[Coordinate, Coordinate]] = Field(default_factory=list, max_length=100)
 
     @model_validator(mode="after")
     def _one_motion(self) -> ObstacleEntry:
@@ -117,12 +188,20 @@ class ObstacleEntry(_Strict):
 class RandomObstacles(_Strict):
     """A seeded field of static cylinders in a box, kept clear of the start and the goal."""
 
-    count: Annotated[int, Field(ge=1, le=64)]
-    seed: int = 0
-    x_range_m: tuple[float, float]
-    y_range_m: tuple[float, float]
-    radius_range_m: tuple[Positive, Positive] = (0.2, 0.4)
-    keep_clear_m: NonNegative = 1.5  # no obstacle surface within this of start or goal
+    count: _whole(1, MAX_OBSTACLES)
+    seed: Seed = 0
+    x_range_m: tuple[Coordinate, Coordinate]
+    y_range_m: tuple[Coordinate, Coordinate]
+    radius_range_m: tuple[ObstacleRadius, ObstacleRadius] = (0.2, 0.4)
+    keep_clear_m: _real(0.0, 100.0, "m") = 1.5  # no obstacle surface within this of start or goal
+
+    @model_validator(mode="after")
+    def _ordered_ranges(self) -> RandomObstacles:
+        for name in ("x_range_m", "y_range_m", "radius_range_m"):
+            low, high = getattr(self, name)
+            if low > high:
+                raise ValueError(f"{name}: low ({low:g}) must not exceed high ({high:g})")
+        return self
 
     def specs(self, keep_clear_of: list[tuple[float, float]]) -> list[ObstacleSpec]:
         rng = np.random.default_rng(self.seed)
@@ -144,9 +223,9 @@ class RobotSpec(_Strict):
     an explicit radius (a radius below the footprint is flagged in every summary)."""
 
     start: Pose
-    radius_margin_m: NonNegative | None = None
-    radius_m: Positive | None = None
-    payload_kg: Annotated[float, Field(ge=0, le=75)] = 0.0  # Husky maximum payload 75 kg
+    radius_margin_m: _real(0.0, 2.0, "m") | None = None
+    radius_m: _real(0.0, 5.0, "m", lo_open=True) | None = None
+    payload_kg: _real(0.0, 75.0, "kg") = 0.0  # Husky maximum payload 75 kg
 
     @model_validator(mode="after")
     def _one_radius(self) -> RobotSpec:
@@ -161,73 +240,114 @@ class RobotSpec(_Strict):
 
 
 class ControllerSpec(_Strict):
-    """NMPC parameters; omitted ones take the paper's simulation defaults (NMPCConfig)."""
+    """NMPC parameters; omitted ones take the paper's simulation defaults (NMPCConfig).
 
-    horizon: Annotated[int, Field(ge=1, le=50)] = 5
-    gamma: Annotated[float, Field(ge=0, le=1)] = 0.1
-    alpha: Annotated[float, Field(ge=0, le=1)] = 0.3
-    state_weight: tuple[Positive, Positive, Positive] = (10.0, 15.0, 0.7)
-    input_weight: tuple[Positive, Positive] = (1.0, 0.1)
-    clf_weight: tuple[Positive, Positive, Positive] = (1.0, 1.0, 1.0)
-    clf_slack_weight: Positive = 70.0
-    decay_slack_weight: Positive = 10.0
-    v_min_mps: Annotated[float, Field(le=0)] = -1.0
-    v_max_mps: Positive = 1.0
-    omega_max_radps: Positive = math.pi / 4
+    Commanded limits may exceed the Husky's (the audit of `husky-sim check` flags that), within
+    what a command can physically mean."""
+
+    horizon: _whole(1, 50, "steps") = 5
+    gamma: _real(0.0, 1.0) = 0.1
+    alpha: _real(0.0, 1.0) = 0.3
+    state_weight: tuple[Weight, Weight, Weight] = (10.0, 15.0, 0.7)
+    input_weight: tuple[Weight, Weight] = (1.0, 0.1)
+    clf_weight: tuple[Weight, Weight, Weight] = (1.0, 1.0, 1.0)
+    clf_slack_weight: Weight = 70.0
+    decay_slack_weight: Weight = 10.0
+    v_min_mps: _real(-5.0, 0.0, "m/s") = -1.0
+    v_max_mps: _real(0.0, 5.0, "m/s", lo_open=True) = 1.0
+    omega_max_radps: _real(0.0, 10.0, "rad/s", lo_open=True) = math.pi / 4
     obstacle_prediction: Literal["constant-velocity", "frozen"] = "constant-velocity"
 
 
+class DriveSpec(_Strict):
+    """Overrides of the skid-steer drive (husky_sim.drive.DriveConfig); omitted ones keep the
+    published Husky values."""
+
+    wheel_separation_multiplier: _real(0.5, 5.0) | None = None
+    max_linear_mps: _real(0.0, 5.0, "m/s", lo_open=True) | None = None
+    max_angular_radps: _real(0.0, 10.0, "rad/s", lo_open=True) | None = None
+    max_linear_accel_mps2: _real(0.0, 50.0, "m/s^2", lo_open=True) | None = None
+    max_angular_accel_radps2: _real(0.0, 100.0, "rad/s^2", lo_open=True) | None = None
+    wheel_torque_limit_nm: _real(0.0, 500.0, "N m", lo_open=True) | None = None
+
+    def config(self) -> DriveConfig:
+        return DriveConfig(**self.model_dump(exclude_none=True))
+
+
 class FrictionSpec(_Strict):
-    ground: Positive = 1.0
-    wheel_longitudinal: Positive = 1.0
-    wheel_lateral_scale: Positive = 1.0
+    ground: _real(0.01, 5.0) = 1.0
+    wheel_longitudinal: _real(0.01, 5.0) = 1.0
+    wheel_lateral_scale: _real(0.01, 5.0) = 1.0
 
 
 class SensingSpec(_Strict):
-    pose_xy_std_m: NonNegative = 0.0
-    pose_yaw_std_rad: NonNegative = 0.0
-    obstacle_xy_std_m: NonNegative = 0.0
-    latency_steps: Annotated[int, Field(ge=0, le=20)] = 0
-    obstacle_velocity_scale: NonNegative = 1.0  # reported / true obstacle velocity
+    pose_xy_std_m: _real(0.0, 5.0, "m") = 0.0
+    pose_yaw_std_rad: _real(0.0, math.pi, "rad") = 0.0
+    obstacle_xy_std_m: _real(0.0, 5.0, "m") = 0.0
+    latency_steps: _whole(0, 20, "steps") = 0
+    obstacle_velocity_scale: _real(0.0, 5.0) = 1.0  # reported / true obstacle velocity
 
 
 class SuccessSpec(_Strict):
-    goal_position_m: Positive = 0.1
-    goal_heading_rad: Positive = 0.1
-    goal_hold_s: Positive = 1.0
-    tracking_rmse_m: Positive = 0.3
-    tracking_settle_s: NonNegative = 10.0
-    stuck_window_steps: Annotated[int, Field(ge=1)] = 10
-    stuck_speed_mps: Positive = 0.05
-    stuck_yaw_rate_radps: Positive = 0.05
+    goal_position_m: _real(0.0, 10.0, "m", lo_open=True) = 0.1
+    goal_heading_rad: _real(0.0, math.pi, "rad", lo_open=True) = 0.1
+    goal_hold_s: _real(0.0, 3600.0, "s", lo_open=True) = 1.0
+    tracking_rmse_m: _real(0.0, 10.0, "m", lo_open=True) = 0.3
+    tracking_settle_s: _real(0.0, 3600.0, "s") = 10.0
+    stuck_window_steps: _whole(1, 1000, "steps") = 10
+    stuck_speed_mps: _real(0.0, 1.0, "m/s", lo_open=True) = 0.05
+    stuck_yaw_rate_radps: _real(0.0, 2.0, "rad/s", lo_open=True) = 0.05
 
 
 class Scenario(_Strict):
     """One scenario file."""
 
-    name: str
-    description: str = ""
-    seed: int = 0
-    tau_s: Positive = 0.1
-    duration_s: Positive = 30.0
-    physics_hz: Annotated[float, Field(ge=60, le=2000)] = 240.0
+    name: Annotated[str, BeforeValidator(_name)]
+    description: Annotated[str, Field(max_length=500, pattern=r"^[^\x00-\x1f\x7f]*$")] = ""
+    seed: Seed = 0
+    tau_s: _real(0.0005, 1.0, "s") = 0.1  # down to one physics step at the fastest physics_hz
+    duration_s: _real(0.0, 3600.0, "s", lo_open=True) = 30.0
+    physics_hz: _real(60.0, 2000.0, "Hz") = 240.0
     robot: RobotSpec
     reference: ReferenceSpec
-    obstacles: list[ObstacleEntry] = Field(default_factory=list)
+    obstacles: list[ObstacleEntry] = Field(default_factory=list, max_length=MAX_OBSTACLES)
     random_obstacles: RandomObstacles | None = None
     controller: ControllerSpec = ControllerSpec()
-    drive: dict[str, float] = Field(default_factory=dict)
+    drive: DriveSpec = DriveSpec()
     friction: FrictionSpec = FrictionSpec()
     sensing: SensingSpec = SensingSpec()
     success: SuccessSpec = SuccessSpec()
 
     @model_validator(mode="after")
-    def _drive_keys_known(self) -> Scenario:
-        known = set(DriveConfig.__dataclass_fields__)
-        unknown = sorted(set(self.drive) - known)
-        if unknown:
-            names = ", ".join(sorted(known))
-            raise ValueError(f"drive: unknown key(s) {', '.join(unknown)} (known: {names})")
+    def _work_fits(self) -> Scenario:
+        ratio = self.physics_hz * self.tau_s
+        if abs(ratio - round(ratio)) > 1e-6:
+            raise ValueError(
+                f"tau_s: must be a whole number of physics steps (physics_hz x tau_s = {ratio:.6g})"
+            )
+        steps = math.ceil(self.duration_s / self.tau_s - 1e-9)
+        if steps < 1:
+            raise ValueError(f"duration_s: must last at least one control step (tau_s = {self.tau_s:g} s)")
+        if steps > MAX_CONTROL_STEPS:
+            raise ValueError(
+                f"duration_s: {self.duration_s:g} s is {steps} control steps at tau_s = {self.tau_s:g} s; "
+                f"at most {MAX_CONTROL_STEPS} are allowed"
+            )
+        return self
+
+    @model_validator(mode="after")
+    def _obstacles_placed(self) -> Scenario:
+        total = len(self.obstacles) + (self.random_obstacles.count if self.random_obstacles else 0)
+        if total > MAX_OBSTACLES:
+            raise ValueError(f"obstacles: {total} in all (with random_obstacles); at most {MAX_OBSTACLES}")
+        if self.random_obstacles is not None:
+            placed = len(self.obstacle_specs()) - len(self.obstacles)
+            if placed < self.random_obstacles.count:
+                raise ValueError(
+                    f"random_obstacles: placed only {placed} of {self.random_obstacles.count} obstacles "
+                    "clear of the start, the goal and each other; widen x_range_m / y_range_m or lower "
+                    "count, radius_range_m or keep_clear_m"
+                )
         return self
 
     @model_validator(mode="after")
@@ -241,8 +361,8 @@ class Scenario(_Strict):
                 gap = math.hypot(pose.x_m - ob.x_m, pose.y_m - ob.y_m) - ob.radius_m - r_robot
                 if gap <= 0:
                     raise ValueError(
-                        f"{label} ({pose.x_m}, {pose.y_m}) lies inside obstacle {i} at "
-                        f"({ob.x_m}, {ob.y_m}) r {ob.radius_m} m with robot radius {r_robot:.3f} m"
+                        f"{label} ({pose.x_m:g}, {pose.y_m:g}) lies inside obstacle {i} at "
+                        f"({ob.x_m:g}, {ob.y_m:g}) r {ob.radius_m:g} m with robot radius {r_robot:.3f} m"
                     )
         return self
 
@@ -254,6 +374,20 @@ class Scenario(_Strict):
                 keep.append((self.reference.goal.x_m, self.reference.goal.y_m))
             specs += self.random_obstacles.specs(keep)
         return specs
+
+    def with_overrides(
+        self, horizon: int | None = None, gamma: float | None = None, seed: int | None = None
+    ) -> Scenario:
+        """This scenario with command-line overrides applied and validated by the same schema
+        (so `--horizon 500` is the same one-line error as `horizon: 500` in the file)."""
+        data = self.model_dump()
+        if horizon is not None:
+            data["controller"]["horizon"] = horizon
+        if gamma is not None:
+            data["controller"]["gamma"] = gamma
+        if seed is not None:
+            data["seed"] = seed
+        return scenario_from_data(data, "override")
 
     def reference_object(self) -> Reference:
         if self.reference.goal is not None:
@@ -278,7 +412,6 @@ class Scenario(_Strict):
 
     def episode_config(self, seed: int | None = None) -> EpisodeConfig:
         f = self.friction
-        drive = DriveConfig(**self.drive)  # keys checked by _drive_keys_known
         return EpisodeConfig(
             start=(self.robot.start.x_m, self.robot.start.y_m, self.robot.start.yaw_rad),
             tau_s=self.tau_s,
@@ -286,7 +419,7 @@ class Scenario(_Strict):
             world=WorldConfig(
                 physics_hz=self.physics_hz, ground_friction=f.ground, obstacles=tuple(self.obstacle_specs())
             ),
-            drive=drive,
+            drive=self.drive.config(),
             wheel_friction=WheelFriction(
                 longitudinal=f.wheel_longitudinal, lateral_scale=f.wheel_lateral_scale
             ),
@@ -297,41 +430,64 @@ class Scenario(_Strict):
         )
 
 
+def excerpt(value: object, limit: int = EXCERPT_CHARS) -> str:
+    """repr(value), cut to `limit` characters: a 1 MB bad value is not echoed whole."""
+    text = repr(value)
+    return text if len(text) <= limit else f"{text[: limit - 3]}... ({len(text)} characters)"
+
+
 def _one_line(error: ValidationError, source: str) -> str:
     first = error.errors()[0]
-    loc = ".".join(str(x) for x in first["loc"]) or "scenario"
-    msg = first["msg"].removeprefix("Value error, ")
+    loc = ".".join(str(x) for x in first["loc"])
+    msg = first["msg"].removeprefix("Value error, ").replace("\n", " ")
     got = first.get("input")
-    got_text = "" if isinstance(got, dict | list) or got is None else f" (got {got!r})"
-    more = f" [+{error.error_count() - 1} more]" if error.error_count() > 1 else ""
-    return f"{source}: {loc}: {msg}{got_text}{more}"
+    got_text = "" if isinstance(got, dict | list) or got is None else f" (got {excerpt(got)})"
+    others = [".".join(str(x) for x in e["loc"]) or "scenario" for e in error.errors()[1:]]
+    listed = ", ".join(others[:3]) + (", ..." if len(others) > 3 else "")
+    more = f" [+{len(others)} more: {listed}]" if others else ""
+    where = f"{loc}: " if loc else ""  # a whole-scenario check names its fields in its message
+    return f"{source}: {where}{msg}{got_text}{more}"
+
+
+def scenario_from_data(data: dict[str, Any], source: str = "scenario") -> Scenario:
+    """Validate plain data (a parsed file, or `Scenario.model_dump()` with changes) strictly:
+    numbers must be numbers, sequences become tuples where the schema says so. One-line
+    ScenarioError on any problem."""
+    try:
+        text = json.dumps(data, default=str)  # dates and other YAML types become strings: rejected
+    except (TypeError, ValueError) as exc:
+        raise ScenarioError(f"{source}: values the schema cannot hold ({exc})") from None
+    try:
+        return Scenario.model_validate_json(text, strict=True)
+    except ValidationError as exc:
+        raise ScenarioError(_one_line(exc, source)) from None
+    except (OverflowError, ArithmeticError) as exc:  # a last line of defence: never a traceback
+        raise ScenarioError(f"{source}: a value out of any usable range ({exc})") from None
 
 
 def resolve(name_or_path: str) -> Path:
     """A scenario file path, or the name of a shipped scenario."""
     path = Path(name_or_path)
-    if path.suffix in (".yaml", ".yml") and path.exists():
+    if path.suffix in (".yaml", ".yml") and (path.exists() or path.is_symlink()):
         return path
-    shipped = SCENARIO_DIR / f"{name_or_path}.yaml"
-    if shipped.exists():
-        return shipped
+    if re.fullmatch(NAME_PATTERN, name_or_path):
+        shipped = SCENARIO_DIR / f"{name_or_path}.yaml"
+        if shipped.is_file():
+            return shipped
     names = ", ".join(sorted(p.stem for p in SCENARIO_DIR.glob("*.yaml")))
-    raise ScenarioError(f"scenario: no file or shipped scenario named {name_or_path!r} (shipped: {names})")
+    raise ScenarioError(
+        f"scenario: no file or shipped scenario named {excerpt(name_or_path, 80)} (shipped: {names})"
+    )
 
 
 def load_scenario(name_or_path: str) -> Scenario:
     """Load and validate a scenario; every problem is a one-line ScenarioError."""
     path = resolve(name_or_path)
     try:
-        data = yaml.safe_load(path.read_text())
-    except yaml.YAMLError as exc:
-        raise ScenarioError(f"{path}: not valid YAML ({str(exc).splitlines()[0]})") from None
-    if not isinstance(data, dict):
-        raise ScenarioError(f"{path}: expected a mapping of scenario fields at the top level")
-    try:
-        return Scenario.model_validate(data)
-    except ValidationError as exc:
-        raise ScenarioError(_one_line(exc, str(path))) from None
+        data = read_scenario_data(path)
+    except ScenarioFileError as exc:
+        raise ScenarioError(str(exc)) from None
+    return scenario_from_data(data, str(path))
 
 
 def shipped_scenarios() -> list[Path]:

@@ -10,14 +10,15 @@ deterministic except for the wall-clock columns.
 from __future__ import annotations
 
 import csv
-import multiprocessing
 import traceback
 from collections.abc import Callable, Iterable, Sequence
-from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass
+from functools import partial
 from pathlib import Path
 
 from tqdm import tqdm
+
+from husky_sim.parallel import process_map
 
 #: Columns of results.md (results.csv has every summary key).
 TABLE_COLUMNS = (
@@ -151,26 +152,18 @@ def run_suite(
     """Run the cells on `jobs` worker processes; return their summaries in `cells` order."""
     if out_dir is not None:
         out_dir.mkdir(parents=True, exist_ok=True)
-    results: list[dict[str, object] | None] = [None] * len(cells)
     bar = tqdm(total=len(cells), disable=not progress, unit="run", dynamic_ncols=True)
+    rows: list[dict[str, object]] = [{}] * len(cells)
+
+    def done(i: int, summary: dict[str, object] | BaseException) -> None:
+        if isinstance(summary, BaseException):  # a dead worker (crash, out of memory)
+            summary = _error_row(cells[i], summary, out_dir)
+        rows[i] = _finish(cells[i], summary, bar, on_result)
+
     try:
-        if jobs <= 1:
-            for i, cell in enumerate(cells):
-                results[i] = _finish(cell, run_cell(cell, out_dir), bar, on_result)
-        else:
-            ctx = multiprocessing.get_context("spawn")  # no inherited PyBullet/CasADi state
-            with ProcessPoolExecutor(max_workers=jobs, mp_context=ctx) as pool:
-                futures = {pool.submit(run_cell, cell, out_dir): i for i, cell in enumerate(cells)}
-                for future in as_completed(futures):
-                    i = futures[future]
-                    try:
-                        summary = future.result()
-                    except Exception as exc:  # noqa: BLE001 - a dead worker (crash, out of memory)
-                        summary = _error_row(cells[i], exc, out_dir)
-                    results[i] = _finish(cells[i], summary, bar, on_result)
+        process_map(partial(run_cell, out_dir=out_dir), cells, jobs, done)
     finally:
         bar.close()
-    rows = [r for r in results if r is not None]
     if out_dir is not None:
         write_results(rows, out_dir)
     return rows
@@ -219,8 +212,35 @@ def write_results(rows: Sequence[dict[str, object]], out_dir: Path) -> tuple[Pat
         writer = csv.DictWriter(f, fieldnames=keys, extrasaction="ignore")
         writer.writeheader()
         writer.writerows(rows)
-    md_path.write_text(markdown_table(rows))
+    md_path.write_text(f"{markdown_table(rows)}\n{outcome_legend(rows)}")
     return csv_path, md_path
+
+
+#: Why the paper's controllers deadlock on a Husky, said once for every results.md that has them.
+PAPER_DEADLOCK_NOTE = (
+    "`bt`, `cbf` and `relax-cbf` are the paper's controllers, reproduced unchanged: a kinematic "
+    "unicycle NMPC whose robot circle is the Husky's real footprint (0.57 m) plus a 0.25 m margin. "
+    "With an obstacle on the straight line to the goal, the short-horizon plan that lowers the cost "
+    "most is to stop at the edge of the inflated circle: going round it costs more within N steps "
+    "than waiting, and Relax-CBF drives s_h to 0, which leaves only B >= 0. So most short-horizon "
+    "runs end `stuck` in front of the obstacle; this is the measured result of the reproduction "
+    "(docs/paper_claims.md), not a fault of the simulator."
+)
+
+
+def outcome_legend(rows: Sequence[dict[str, object]]) -> str:
+    """What the outcome words in these rows mean, and why the paper's controllers deadlock."""
+    from husky_sim.metrics import OUTCOME_MEANINGS
+
+    seen = sorted({str(r.get("outcome")) for r in rows}, key=list(OUTCOME_MEANINGS).index)
+    lines = ["## What the outcomes mean", ""]
+    lines += [f"- `{o}`: {OUTCOME_MEANINGS[o]}" for o in seen if o in OUTCOME_MEANINGS]
+    stuck_paper = [
+        r for r in rows if r.get("outcome") == "stuck" and r.get("controller") in SUITE_CONTROLLERS
+    ]
+    if stuck_paper:
+        lines += ["", f"{len(stuck_paper)} of {len(rows)} runs are `stuck`. {PAPER_DEADLOCK_NOTE}"]
+    return "\n".join(lines) + "\n"
 
 
 def markdown_table(rows: Iterable[dict[str, object]], columns: Sequence[str] = TABLE_COLUMNS) -> str:

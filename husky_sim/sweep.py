@@ -14,7 +14,7 @@ to 1.2 by default) while the obstacles keep their true motion.
 
 Execution backends (the same picklable `run_sample` for both, so results are identical):
 
-- ``local`` (default): a ``concurrent.futures.ProcessPoolExecutor`` on this machine's cores
+- ``local`` (default): husky_sim.parallel.process_map on this machine's cores
   (``spawn`` start method: CasADi/IPOPT and PyBullet are not fork-safe once threads exist).
   Needs nothing beyond the project's dependencies.
 - ``dask``: ``distributed.Client.map`` on a Dask cluster (``--scheduler ADDRESS``, or an
@@ -28,17 +28,15 @@ Execution backends (the same picklable `run_sample` for both, so results are ide
 
 from __future__ import annotations
 
-import multiprocessing
 import os
 from collections.abc import Callable, Sequence
-from concurrent.futures import ProcessPoolExecutor
 from dataclasses import asdict, dataclass, fields
 from typing import Any, Literal
 
 import numpy as np
 
-from husky_sim.drive import DriveConfig
-from husky_sim.scenario import Scenario
+from husky_sim.parallel import process_map
+from husky_sim.scenario import Scenario, scenario_from_data
 
 Backend = Literal["local", "dask"]
 BACKENDS: tuple[Backend, ...] = ("local", "dask")
@@ -129,7 +127,7 @@ def sample_perturbations(ranges: PerturbationRanges, count: int, seed: int) -> l
 
 def nominal_torque_nm(scenario: Scenario) -> float:
     """The scenario's wheel torque limit (N m): its drive override or the DriveConfig default."""
-    return float(scenario.drive.get("wheel_torque_limit_nm", DriveConfig().wheel_torque_limit_nm))
+    return scenario.drive.config().wheel_torque_limit_nm
 
 
 def apply_perturbation(scenario: Scenario, p: Perturbation) -> Scenario:
@@ -148,7 +146,7 @@ def apply_perturbation(scenario: Scenario, p: Perturbation) -> Scenario:
         obstacle_xy_std_m=p.obstacle_xy_std_m,
         obstacle_velocity_scale=scenario.sensing.obstacle_velocity_scale * p.obstacle_velocity_scale,
     )
-    return Scenario.model_validate(data)
+    return scenario_from_data(data, f"check sample {p.index}")
 
 
 @dataclass(frozen=True)
@@ -164,7 +162,7 @@ def run_sample(task: SampleTask) -> dict[str, Any]:
     """Run one perturbed scenario in PyBullet; return its headline metrics (JSON-able)."""
     from husky_sim.run import run_scenario  # imported in the worker
 
-    scenario = Scenario.model_validate(task.scenario)
+    scenario = scenario_from_data(task.scenario, f"check sample {task.index}")
     summary = run_scenario(scenario, task.controller)  # horizon, gamma and seed are in the scenario
     keys = (
         "outcome",
@@ -194,22 +192,38 @@ def default_jobs() -> int:
 def run_local(
     tasks: Sequence[SampleTask], jobs: int, progress: Callable[[int], None] | None = None
 ) -> list[dict]:
-    """Run the tasks on `jobs` local processes (in this process when jobs == 1), in task order."""
-    if jobs <= 1 or len(tasks) <= 1:
-        results = []
-        for task in tasks:
-            results.append(run_sample(task))
-            if progress:
-                progress(len(results))
-        return results
-    context = multiprocessing.get_context("spawn")
-    with ProcessPoolExecutor(max_workers=min(jobs, len(tasks)), mp_context=context) as pool:
-        results = []
-        for result in pool.map(run_sample, tasks):
-            results.append(result)
-            if progress:
-                progress(len(results))
-        return results
+    """Run the tasks on `jobs` local processes (in this process when jobs == 1), in task order;
+    a sample whose worker crashed becomes an `error` result (failing, and saved for a rerun)."""
+    finished = [0]
+
+    def done(_i: int, _result: object) -> None:
+        finished[0] += 1
+        if progress:
+            progress(finished[0])
+
+    results = process_map(run_sample, tasks, jobs, done)
+    return [
+        error_result(t, r) if isinstance(r, BaseException) else r for t, r in zip(tasks, results, strict=True)
+    ]
+
+
+def error_result(task: SampleTask, exc: BaseException) -> dict[str, Any]:
+    """A sample that crashed: it fails the check and names the error."""
+    return {
+        "index": task.index,
+        "outcome": "error",
+        "error": f"{type(exc).__name__}: {str(exc)[:200]}",
+        "collided": False,
+        "converged": False,
+        "min_clearance_m": None,
+        "final_position_error_m": None,
+        "tracking_rmse_m": None,
+        "time_to_goal_s": None,
+        "fallbacks": None,
+        "steps": 0,
+        **dict.fromkeys(WALL_CLOCK_KEYS),
+        "passed": False,
+    }
 
 
 def run_dask(

@@ -13,9 +13,9 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
-import pybullet as p
 
 from controllers import Obstacle
+from husky_sim.bullet import pybullet as p
 
 
 @dataclass(frozen=True)

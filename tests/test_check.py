@@ -97,7 +97,7 @@ def test_timing_fails_when_tau_is_shorter_than_the_measured_solves() -> None:
     # a runnable scenario (2000 Hz physics, one physics step per control step) whose tau of 0.5 ms
     # is shorter than any IPOPT solve: the real measured p99 must exceed it
     shipped = load_scenario("paper_point_stabilisation")
-    tight = _modified(shipped, tau_s=0.0005, physics_hz=2000.0)
+    tight = _modified(shipped, tau_s=0.0005, physics_hz=2000.0, duration_s=5.0)
     tight.episode_config()  # the scenario itself is valid and could run
     times = measure_solve_times(tight, "cbf", solves=20)
     assert times.shape == (20,) and np.all(times > 0)
@@ -134,7 +134,7 @@ def test_a_perturbation_changes_only_its_fields() -> None:
     sc = apply_perturbation(base, p)
     assert sc.seed == p.episode_seed
     assert sc.friction.ground == p.ground_friction and sc.robot.payload_kg == p.payload_kg
-    assert sc.drive["wheel_torque_limit_nm"] == pytest.approx(nominal_torque_nm(base) * p.torque_scale)
+    assert sc.drive.wheel_torque_limit_nm == pytest.approx(nominal_torque_nm(base) * p.torque_scale)
     assert sc.sensing.latency_steps == p.latency_steps
     assert sc.sensing.obstacle_velocity_scale == p.obstacle_velocity_scale
     changed = {"name", "description", "seed", "friction", "robot", "drive", "sensing"}

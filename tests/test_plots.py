@@ -13,24 +13,37 @@ import xml.etree.ElementTree as ET
 from pathlib import Path
 
 import matplotlib.image
+import matplotlib.pyplot as plt
 import numpy as np
 import pytest
+from matplotlib.figure import Figure
+from matplotlib.image import AxesImage
+from matplotlib.patches import Circle
 
 from husky_sim.cli import main
 from husky_sim.plots import (
     DPI,
+    NO_RUNS_TEXT,
     OUTCOME_CATEGORIES,
     RUN_FIGURES,
+    SAFE_CLEARANCE_M,
     PlotInputError,
     barrier_series,
     barrier_values,
+    clearance_colour,
+    clearance_missing_reason,
+    comparison_figure,
     load_run,
+    moving_obstacles,
     obstacle_centres_at,
     plot_comparison,
     plot_run,
     plot_tuning_maps,
     read_results,
+    third_missing_reason,
+    tuning_figure,
     tuning_grid,
+    xy_figure,
 )
 from husky_sim.run import run_scenario
 from husky_sim.scenario import load_scenario
@@ -48,12 +61,14 @@ def _record(root: Path, name: str, controller: str, duration_s: float, **kwargs:
 
 @pytest.fixture(scope="module")
 def runs(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
-    """Short real runs: point stabilisation with cbf (file's N) and bt N=7, and a moving obstacle."""
+    """Short real runs: point stabilisation with cbf (file's N) and bt N=7, a moving obstacle, and
+    the paper's point stabilisation (goal 10 m straight ahead along y: a tall scene)."""
     root = tmp_path_factory.mktemp("runs")
     return {
         "cbf": _record(root, SCENARIO, "cbf", 3.0),
         "bt": _record(root, SCENARIO, "bt", 3.0, horizon=7),
         "moving": _record(root, "head_on_moving_obstacle", "relax-cbf", 2.0, horizon=5),
+        "tall": _record(root, "paper_point_stabilisation", "cbf", 2.0),
     }
 
 
@@ -277,3 +292,148 @@ def test_bad_input_is_one_line_and_exit_code_2(
     assert main(argv) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith("husky-sim: error:") and words in err[0], err
+
+
+# ---------------------------------------------------------------------------------------------
+# Framing, layout and colour scales
+# ---------------------------------------------------------------------------------------------
+
+
+def _assert_xy_holds_everything(fig: Figure, runs: list[Path]) -> None:
+    """Every circle on the xy axes (obstacles, their robot-radius-grown circles, moving marks),
+    the start and the goal lie inside the axis limits, with some margin."""
+    ax = fig.axes[0]
+    (x0, x1), (y0, y1) = ax.get_xlim(), ax.get_ylim()
+    circles = [patch for patch in ax.patches if isinstance(patch, Circle)]
+    assert circles
+    for circle in circles:
+        (cx, cy), r = circle.center, circle.radius
+        assert x0 < cx - r and cx + r < x1 and y0 < cy - r and cy + r < y1, (
+            circle,
+            ax.get_xlim(),
+            ax.get_ylim(),
+        )
+    run = load_run(runs[0])
+    for j in np.flatnonzero(~moving_obstacles(run.trace)):  # static ones get the grown circle
+        grown_r = float(run.trace.obstacle_radius_m[j]) + run.robot_radius_m
+        assert any(c.radius == pytest.approx(grown_r) for c in circles), "obstacle + robot radius circle"
+    for path in runs:
+        log = load_run(path).log
+        for x, y in ((log["x_m"][0], log["y_m"][0]), (log["x_m"][-1], log["y_m"][-1])):
+            assert x0 < x < x1 and y0 < y < y1
+    gx, gy = run.trace.goal[:2]
+    assert x0 + 0.2 < gx < x1 - 0.2 and y0 + 0.2 < gy < y1 - 0.2
+
+
+def test_comparison_axes_hold_every_drawn_circle(runs: dict[str, Path]) -> None:
+    """The grown circle (0.45 m + the 0.82 m robot circle around y = 0) reaches y = -1.27 m,
+    below anything the runs drove through: it must still be inside the limits."""
+    pair = [runs["cbf"], runs["bt"]]
+    fig = comparison_figure([load_run(d) for d in pair])
+    try:
+        _assert_xy_holds_everything(fig, pair)
+    finally:
+        plt.close(fig)
+
+
+@pytest.mark.parametrize("case", ["tall", "moving", "cbf"])
+def test_xy_figure_holds_scene_and_labels(case: str, runs: dict[str, Path], tmp_path: Path) -> None:
+    """Tall (paper point stabilisation), wide (moving obstacle) and plain scenes: everything drawn is
+    inside the limits, and the axis labels and title lie inside the figure and its tight bbox,
+    which is what the PNG is cropped to."""
+    fig = xy_figure(load_run(runs[case]))
+    try:
+        _assert_xy_holds_everything(fig, [runs[case]])
+        fig.canvas.draw()
+        renderer = fig.canvas.get_renderer()
+        ax = fig.axes[0]
+        tight_px = fig.get_tightbbox(renderer).transformed(fig.dpi_scale_trans)
+        for text in (ax.yaxis.label, ax.xaxis.label, ax.title):
+            box = text.get_window_extent(renderer)
+            assert box.width > 0 and box.height > 0
+            assert fig.bbox.x0 <= box.x0 and box.x1 <= fig.bbox.x1, (text.get_text(), box, fig.bbox)
+            assert fig.bbox.y0 <= box.y0 and box.y1 <= fig.bbox.y1, (text.get_text(), box, fig.bbox)
+            assert tight_px.x0 <= box.x0 + 1 and box.x1 <= tight_px.x1 + 1
+        expected_px = (
+            tight_px.width / fig.dpi * DPI + 0.2 * DPI,
+            tight_px.height / fig.dpi * DPI + 0.2 * DPI,
+        )
+    finally:
+        plt.close(fig)
+    png = plot_run(runs[case], tmp_path)["xy"][0]
+    height, width = matplotlib.image.imread(png).shape[:2]
+    assert (width, height) == pytest.approx(expected_px, abs=3)  # cropped to the tight bbox + 0.1 in
+    if case == "tall":
+        assert height > 1.5 * width
+
+
+def test_clearance_colours_are_absolute() -> None:
+    """0 m (contact) and below are red, 0.36 m is not red (it is past yellow, toward green),
+    SAFE_CLEARANCE_M and above are green; the scale does not depend on the other cells."""
+    red, past = clearance_colour(0.0), clearance_colour(0.36)
+    assert red[0] > 0.5 and red[1] < 0.2 and red[2] < 0.3
+    assert clearance_colour(-0.3) == red
+    assert past[1] > past[0] and past[1] > 0.6
+    green = clearance_colour(SAFE_CLEARANCE_M)
+    assert green[1] > 0.3 and green[1] > 2 * green[0]
+    assert clearance_colour(2.0) == green
+    assert clearance_colour(float("nan")) == (1.0, 1.0, 1.0, 1.0)
+
+
+def _grid_rows(clearances_m: list[float], outcome: str = "stuck", **extra: object) -> list[dict[str, str]]:
+    return [
+        {
+            "scenario": SCENARIO,
+            "controller": "cbf",
+            "horizon": str(5 + 2 * n),
+            "gamma": "0.1",
+            "outcome": outcome,
+            "min_clearance_m": str(c),
+            **{k: str(v) for k, v in extra.items()},
+        }
+        for n, c in enumerate(clearances_m)
+    ]
+
+
+def _clearance_image(fig: Figure) -> AxesImage:
+    (image,) = fig.axes[1].get_images()
+    return image
+
+
+def test_tuning_maps_share_one_clearance_scale() -> None:
+    """Two maps with different clearance ranges colour a cell alike; the colour bar says the scale
+    is fixed and in metres."""
+    figures = [
+        tuning_figure(SCENARIO, "cbf", tuning_grid(_grid_rows([0.36, 0.4]))),
+        tuning_figure(SCENARIO, "cbf", tuning_grid(_grid_rows([0.36, 1.5, -0.01]))),
+    ]
+    try:
+        images = [_clearance_image(fig) for fig in figures]
+        for image in images:
+            assert (image.norm.vmin, image.norm.vmax) == (0.0, SAFE_CLEARANCE_M)
+            assert image.cmap(image.norm(0.36)) == pytest.approx(clearance_colour(0.36))
+        labels = [ax.get_ylabel() for fig in figures for ax in fig.axes if "clearance (m)" in ax.get_ylabel()]
+        assert len(labels) == 2 and all("fixed scale" in t and "≤ 0 m" in t for t in labels), labels
+    finally:
+        for fig in figures:
+            plt.close(fig)
+
+
+def test_empty_tuning_panels_say_what_is_missing() -> None:
+    """No run reached the goal: the time panel says so (with the outcomes); no clearance column:
+    the clearance panel names it; no runs at all: the panel says so."""
+    rows = [{k: v for k, v in row.items() if k != "min_clearance_m"} for row in _grid_rows([0.3, 0.3])]
+    grid = tuning_grid(rows)
+    assert "no run reached the goal" in grid.third_missing and "time to goal undefined" in grid.third_missing
+    assert "stuck 2" in grid.third_missing
+    assert "no min_clearance_m column" in grid.min_clearance_missing
+    fig = tuning_figure(SCENARIO, "cbf", grid)
+    try:
+        texts = [[t.get_text() for t in ax.texts] for ax in fig.axes[1:3]]
+        assert texts == [[grid.min_clearance_missing], [grid.third_missing]]
+    finally:
+        plt.close(fig)
+    reached = _grid_rows([0.3], outcome="reached", time_to_goal_s="")
+    assert "for the 1 run that reached the goal" in third_missing_reason(reached)
+    assert "value in results.csv\nfor 1 run" in clearance_missing_reason(_grid_rows([float("nan")]))
+    assert clearance_missing_reason([]) == third_missing_reason([]) == NO_RUNS_TEXT

@@ -1,0 +1,71 @@
+"""One way to run independent episodes on local worker processes (the suite and the sweep).
+
+Workers are started with `spawn` (CasADi/IPOPT and PyBullet hold threads and native state that
+`fork` would copy half-alive) and ignore SIGINT: a Ctrl-C in a terminal reaches the whole process
+group, and the parent alone decides. The parent, on a signal (husky_sim.interrupts), stops the
+workers at once instead of waiting for their episodes, so a sweep ends within a second too.
+Results come back in input order; an item whose worker died (a crash, out of memory) comes back
+as the exception, for the caller to report, never as a lost run.
+"""
+
+from __future__ import annotations
+
+import multiprocessing
+import signal
+from collections.abc import Callable, Sequence
+from concurrent.futures import Future, ProcessPoolExecutor, as_completed
+from typing import TypeVar
+
+T = TypeVar("T")
+R = TypeVar("R")
+
+
+def _ignore_sigint() -> None:
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+def _stop_workers(pool: ProcessPoolExecutor) -> None:
+    """Cancel what has not started and terminate the workers (Python 3.11 has no public call)."""
+    pool.shutdown(wait=False, cancel_futures=True)
+    for process in list((getattr(pool, "_processes", None) or {}).values()):
+        process.terminate()
+
+
+def process_map(
+    fn: Callable[[T], R],
+    items: Sequence[T],
+    jobs: int,
+    on_done: Callable[[int, R | BaseException], None] | None = None,
+) -> list[R | BaseException]:
+    """fn over items on `jobs` processes (in this process when jobs <= 1 or one item), in item
+    order. `on_done(index, result)` is called as each finishes. An exception fn raises, or a
+    worker's death, is returned in its item's place (signals, being BaseExceptions, propagate)."""
+    results: list[R | BaseException | None] = [None] * len(items)
+    if jobs <= 1 or len(items) <= 1:
+        for i, item in enumerate(items):
+            try:
+                results[i] = fn(item)
+            except Exception as exc:  # noqa: BLE001 - reported in the item's place, as from a worker
+                results[i] = exc
+            if on_done is not None:
+                on_done(i, results[i])
+        return results  # type: ignore[return-value]
+    context = multiprocessing.get_context("spawn")
+    pool = ProcessPoolExecutor(
+        max_workers=min(jobs, len(items)), mp_context=context, initializer=_ignore_sigint
+    )
+    try:
+        futures: dict[Future, int] = {pool.submit(fn, item): i for i, item in enumerate(items)}
+        for future in as_completed(futures):
+            i = futures[future]
+            try:
+                results[i] = future.result()
+            except Exception as exc:  # noqa: BLE001 - a dead worker (crash, out of memory)
+                results[i] = exc
+            if on_done is not None:
+                on_done(i, results[i])
+    except BaseException:  # a signal or an error in on_done: do not wait for running episodes
+        _stop_workers(pool)
+        raise
+    pool.shutdown(wait=True)
+    return results  # type: ignore[return-value]
