@@ -35,6 +35,7 @@ def _number_in(kind: type[int] | type[float], low: float, high: float):
     """An argparse type: an integer (kind int) or a finite number (kind float) in [low, high],
     else a one-line error naming the range."""
     word = "an integer" if kind is int else "a number"
+    bounds = f"[{low}, {high}]" if kind is int else f"[{low:g}, {high:g}]"
 
     def parse(text: str) -> int | float:
         try:
@@ -44,7 +45,7 @@ def _number_in(kind: type[int] | type[float], low: float, high: float):
                 f"expected {word} in [{low:g}, {high:g}], got {text[:40]!r}"
             ) from None
         if not (math.isfinite(value) and low <= value <= high):
-            raise argparse.ArgumentTypeError(f"expected {word} in [{low:g}, {high:g}], got {value:g}")
+            raise argparse.ArgumentTypeError(f"expected {word} in {bounds}, got {value:g}")
         return value
 
     return parse

@@ -171,6 +171,10 @@ class Recording:
         return float(np.sum(np.hypot(*np.diff(self.poses[:, :2], axis=0).T)))
 
 
+#: Longest recording replayed (s): as long as the longest scenario (an hour of physics steps).
+MAX_RECORDING_S = 3600.0
+
+
 def make_recording(
     source: str,
     fmt: str,
@@ -192,8 +196,13 @@ def make_recording(
             raise ReplayError(f"{source}: a {name} holds a non-finite value")
     c_order, p_order = np.argsort(cmd_t, kind="stable"), np.argsort(pose_t, kind="stable")
     t0 = pose_t[p_order[0]]
-    if pose_t[p_order[-1]] - t0 <= 0:
+    span_s = pose_t[p_order[-1]] - t0
+    if span_s <= 0:
         raise ReplayError(f"{source}: the recorded poses span no time")
+    if span_s > MAX_RECORDING_S:
+        raise ReplayError(
+            f"{source}: the recorded poses span {span_s:.4g} s; at most {MAX_RECORDING_S:g} s can be replayed"
+        )
     return Recording(source, fmt, cmd_t[c_order] - t0, cmd[c_order], pose_t[p_order] - t0, pose[p_order])
 
 

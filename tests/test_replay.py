@@ -293,6 +293,18 @@ def _bad_csv(tmp_path: Path) -> Path:
     return path
 
 
+def _endless_csv(tmp: Path) -> Path:
+    path = tmp / "endless.csv"
+    path.write_text("t,v,omega,x,y,theta\n0,0,0,0,0,0\n1e300,1,0,0,0,0\n")
+    return path
+
+
+def _nan_csv(tmp: Path) -> Path:
+    path = tmp / "nan.csv"
+    path.write_text("t,v,omega,x,y,theta\n0,0,0,0,0,0\n0.1,nan,0,0,0,0\n0.2,1,inf,1,0,0\n")
+    return path
+
+
 @pytest.mark.parametrize(
     ("make", "extra", "message"),
     [
@@ -300,6 +312,8 @@ def _bad_csv(tmp_path: Path) -> Path:
         (_garbage_ros2, [], "not a readable ROS bag"),
         (lambda tmp: tmp / "missing.bag", [], "no such file or directory"),
         (_bad_csv, [], "missing CSV column(s) theta"),
+        (_endless_csv, [], "at most 3600 s can be replayed"),
+        (_nan_csv, [], "non-finite value"),
         ("cmd-only", [], "no topic '/odometry/filtered'"),
         ("ros1", ["--cmd-topic", "/nope"], "no topic '/nope'"),
         ("ros2", ["--cmd-topic", "/odometry/filtered"], "has type nav_msgs/msg/Odometry"),
