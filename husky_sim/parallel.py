@@ -2,8 +2,10 @@
 
 Workers are started with `spawn` (CasADi/IPOPT and PyBullet hold threads and native state that
 `fork` would copy half-alive) and ignore SIGINT: a Ctrl-C in a terminal reaches the whole process
-group, and the parent alone decides. The parent, on a signal (husky_sim.interrupts), stops the
-workers at once instead of waiting for their episodes, so a sweep ends within a second too.
+group, and the parent alone decides. The parent, on a signal (husky_sim.interrupts), cancels what
+has not started and sends the workers SIGTERM instead of waiting for their episodes: each ends
+the episode in hand as `interrupted` (its summary written) and exits, so a suite ends within a
+second too.
 Results come back in input order; an item whose worker died (a crash, out of memory) comes back
 as the exception, for the caller to report, never as a lost run.
 """
@@ -11,24 +13,44 @@ as the exception, for the caller to report, never as a lost run.
 from __future__ import annotations
 
 import multiprocessing
+import os
 import signal
 from collections.abc import Callable, Sequence
 from concurrent.futures import Future, ProcessPoolExecutor, as_completed
 from typing import TypeVar
 
+from husky_sim import interrupts
+
 T = TypeVar("T")
 R = TypeVar("R")
 
 
-def _ignore_sigint() -> None:
+def _init_worker() -> None:
+    """SIGTERM (the parent stopping the pool) ends the episode in hand as `interrupted`, with its
+    summary written; SIGINT is the parent's to handle."""
+    interrupts.install()
+    interrupts.begin_run()
     signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
+def _in_worker(fn: Callable[[T], R], item: T) -> R:
+    """fn(item) in a worker; a worker whose episode was interrupted exits instead of taking the
+    next item from the queue."""
+    try:
+        return fn(item)
+    except interrupts.RunInterrupted as exc:
+        os._exit(exc.exit_code)
+
+
 def _stop_workers(pool: ProcessPoolExecutor) -> None:
-    """Cancel what has not started and terminate the workers (Python 3.11 has no public call)."""
+    """Cancel what has not started and terminate the workers (Python 3.11 has no public call;
+    `shutdown` forgets the processes, so they are taken first)."""
+    processes = list((getattr(pool, "_processes", None) or {}).values())
     pool.shutdown(wait=False, cancel_futures=True)
-    for process in list((getattr(pool, "_processes", None) or {}).values()):
+    for process in processes:
         process.terminate()
+    for process in processes:
+        process.join(timeout=1.0)
 
 
 def process_map(
@@ -52,10 +74,10 @@ def process_map(
         return results  # type: ignore[return-value]
     context = multiprocessing.get_context("spawn")
     pool = ProcessPoolExecutor(
-        max_workers=min(jobs, len(items)), mp_context=context, initializer=_ignore_sigint
+        max_workers=min(jobs, len(items)), mp_context=context, initializer=_init_worker
     )
     try:
-        futures: dict[Future, int] = {pool.submit(fn, item): i for i, item in enumerate(items)}
+        futures: dict[Future, int] = {pool.submit(_in_worker, fn, item): i for i, item in enumerate(items)}
         for future in as_completed(futures):
             i = futures[future]
             try:

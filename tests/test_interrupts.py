@@ -72,6 +72,27 @@ def test_signals_at_random_instants_end_the_run_as_interrupted(tmp_path: Path) -
     assert any((tmp_path / f"run_{i}" / "summary.json").exists() for i in range(len(cases)))
 
 
+@pytest.mark.slow
+def test_an_interrupted_suite_stops_its_workers_and_writes_no_results(tmp_path: Path) -> None:
+    out = tmp_path / "suite"
+    args = ["suite", "--scenarios", "husky_circle_tracking", "--controllers", "cbf", "relax-cbf"]
+    proc = _run_cli([*args, "--horizons", "5", "--jobs", "2", "--quiet", "--out", str(out)])
+    deadline = time.monotonic() + 60.0
+    while time.monotonic() < deadline and len(list(out.glob("runs/*/log.csv"))) < 2:
+        time.sleep(0.1)  # both workers are in their episodes
+    time.sleep(1.0)
+    sent = time.monotonic()
+    proc.send_signal(signal.SIGINT)
+    _, err = proc.communicate(timeout=60)
+    took_s = time.monotonic() - sent
+    assert proc.returncode == 130, err
+    assert took_s < 1.0, f"took {took_s:.2f} s to stop"
+    assert not (out / "results.csv").exists() and "no results.csv written" in err
+    summaries = [json.loads(p.read_text()) for p in out.glob("runs/*/summary.json")]
+    assert len(summaries) == 2 and {s["outcome"] for s in summaries} == {"interrupted"}
+    assert {s["interrupted_by"] for s in summaries} == {"SIGTERM"}  # the parent stopped them
+
+
 class _Signalled(BaseException):
     pass
 
