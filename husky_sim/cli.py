@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import os
 import sys
 from collections.abc import Sequence
 
@@ -422,6 +423,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     except (UsageError, ValueError) as exc:  # ConfigError and ScenarioError are ValueErrors
         print(f"husky-sim: error: {_one_line(exc)}", file=sys.stderr)
         return 2
+    except BrokenPipeError:  # `husky-sim scenarios | head`: the reader left, nothing to report
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 1
     except OSError as exc:  # the machine, not the user: a full disk, a vanished directory
         print(f"husky-sim: error: {_one_line(exc)}", file=sys.stderr)
         return 1

@@ -20,7 +20,6 @@ import yaml
 from ruamel.yaml import YAML
 from ruamel.yaml.error import MarkedYAMLError, YAMLError
 from ruamel.yaml.events import (
-    AliasEvent,
     MappingEndEvent,
     MappingStartEvent,
     SequenceEndEvent,
@@ -74,7 +73,8 @@ def _decode(path: Path, raw: bytes) -> str:
 
 
 def _check_shape(path: Path, text: str) -> None:
-    """Refuse excessive nesting before composing (which recurses) and count aliases cheaply."""
+    """Refuse excessive nesting before composing (which recurses). Alias expansion is bounded
+    after loading (`_check_size`), where shared values are visible."""
     depth = 0
     try:
         for event in _yaml().parse(io.StringIO(text)):
@@ -88,8 +88,6 @@ def _check_shape(path: Path, text: str) -> None:
                     )
             elif isinstance(event, MappingEndEvent | SequenceEndEvent):
                 depth -= 1
-            elif isinstance(event, AliasEvent):
-                pass  # expansion is bounded after loading, where shared values are visible
     except (MarkedYAMLError, YAMLError) as exc:
         raise ScenarioFileError(f"{path}: not valid YAML ({_first_line(exc)})") from None
 

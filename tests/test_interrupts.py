@@ -43,13 +43,14 @@ def _run_cli(args: list[str]) -> subprocess.Popen:
 @pytest.mark.slow
 def test_signals_at_random_instants_end_the_run_as_interrupted(tmp_path: Path) -> None:
     """Seeded random instants, from start-up to the middle of the closed loop (the 30 s tracking
-    episode runs about 6 s here, so every signal lands before it ends)."""
+    episode at N = 5 never stops early and runs 5 to 10 s here, so every signal lands before it
+    ends)."""
     rng = random.Random(2026)
-    cases = [(signal.SIGINT, rng.uniform(0.2, 4.0)) for _ in range(4)]
-    cases += [(signal.SIGTERM, rng.uniform(0.2, 4.0)), (signal.SIGINT, 2.5)]
+    cases = [(signal.SIGINT, rng.uniform(0.2, 3.5)) for _ in range(4)]
+    cases += [(signal.SIGTERM, rng.uniform(0.2, 3.5)), (signal.SIGINT, 2.5)]
     for i, (sig, delay_s) in enumerate(cases):
         out = tmp_path / f"run_{i}"
-        proc = _run_cli(["run", "husky_circle_tracking", "--out", str(out)])
+        proc = _run_cli(["run", "husky_circle_tracking", "--horizon", "5", "--out", str(out)])
         time.sleep(delay_s)
         sent = time.monotonic()
         proc.send_signal(sig)
