@@ -228,6 +228,22 @@ PAPER_DEADLOCK_NOTE = (
 )
 
 
+#: A stuck run this close to its goal (m) settled beside it rather than in front of an obstacle.
+NEAR_GOAL_M = 1.0
+BESIDE_GOAL_NOTE = (
+    "The paper's cost has no terminal term, and a unicycle beside its goal lowers a quadratic cost "
+    "only by backing up and turning, which pays within a short horizon only when the lateral error "
+    "is large: so it stops a few tenths of a metre beside the goal."
+)
+
+
+def _float_or_inf(value: object) -> float:
+    try:
+        return float(value)
+    except (TypeError, ValueError):
+        return float("inf")
+
+
 def outcome_legend(rows: Sequence[dict[str, object]]) -> str:
     """What the outcome words in these rows mean, and why the paper's controllers deadlock."""
     from husky_sim.metrics import OUTCOME_MEANINGS
@@ -240,6 +256,13 @@ def outcome_legend(rows: Sequence[dict[str, object]]) -> str:
     ]
     if stuck_paper:
         lines += ["", f"{len(stuck_paper)} of {len(rows)} runs are `stuck`. {PAPER_DEADLOCK_NOTE}"]
+        near = [r for r in stuck_paper if _float_or_inf(r.get("final_position_error_m")) < NEAR_GOAL_M]
+        if near:
+            lines += [
+                "",
+                f"{len(near)} of the stuck runs got past the obstacles and stopped within "
+                f"{NEAR_GOAL_M:g} m of the goal, beside it. {BESIDE_GOAL_NOTE}",
+            ]
     return "\n".join(lines) + "\n"
 
 

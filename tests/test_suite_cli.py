@@ -213,3 +213,20 @@ def test_kinematic_tracking_run_shorter_than_settle_time_has_no_rmse_and_does_no
     sc = load_scenario("husky_circle_tracking").model_copy(update={"duration_s": 1.0})
     summary = run_scenario_kinematic(sc, "cbf", 5)
     assert summary["tracking_rmse_m"] is None and summary["converged"] is False
+
+
+def test_results_md_explains_every_outcome_word_it_shows() -> None:
+    from husky_sim.metrics import OUTCOME_MEANINGS
+    from husky_sim.suite import outcome_legend
+
+    rows = [
+        {"controller": "bt", "outcome": "stuck", "final_position_error_m": 6.5},
+        {"controller": "cbf", "outcome": "stuck", "final_position_error_m": 0.28},
+        {"controller": "relax-cbf", "outcome": "collided", "final_position_error_m": 3.0},
+        {"controller": "cbf", "outcome": "error"},
+    ]
+    text = outcome_legend(rows)
+    for word in ("stuck", "collided", "error"):
+        assert f"- `{word}`: {OUTCOME_MEANINGS[word]}" in text
+    assert "- `reached`" not in text  # only the words the table shows
+    assert "2 of 4 runs are `stuck`" in text and "1 of the stuck runs" in text and "beside" in text
