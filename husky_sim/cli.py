@@ -413,7 +413,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     interrupts.install()  # first: an interrupt during start-up is honoured too
     try:
         parser = build_parser()
-        args = parser.parse_args(argv)
+        try:
+            args = parser.parse_args(argv)
+        except SystemExit as exc:  # a usage mistake (one line, exit 2) or --help (exit 0)
+            return int(exc.code or 0)
         interrupts.check()
         code = args.func(args)
     except interrupts.RunInterrupted as exc:
