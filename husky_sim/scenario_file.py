@@ -102,11 +102,17 @@ def _first_line(exc: Exception) -> str:
     return (text[0] if text else type(exc).__name__)[:200]
 
 
+#: Largest integer magnitude read (no field needs more; Python refuses to print ints over 4,300
+#: digits, so larger ones could not even be quoted in an error).
+MAX_INTEGER = 10**18
+
+
 def _check_size(path: Path, data: Any) -> None:
-    """Count values as they would be validated (aliases expanded), stopping at the budget."""
-    count, stack = 0, [data]
+    """Count values as they would be validated (aliases expanded), stopping at the budget, and
+    refuse integers no field could hold, naming where they are."""
+    count, stack = 0, [(data, "")]
     while stack:
-        item = stack.pop()
+        item, where = stack.pop()
         count += 1
         if count > MAX_NODES:
             raise ScenarioFileError(
@@ -114,10 +120,14 @@ def _check_size(path: Path, data: Any) -> None:
                 "a scenario holds at most 64 obstacles"
             )
         if isinstance(item, dict):
-            stack.extend(item.keys())
-            stack.extend(item.values())
+            stack.extend((key, where) for key in item)
+            stack.extend((value, f"{where}.{key}".lstrip(".")) for key, value in item.items())
         elif isinstance(item, list):
-            stack.extend(item)
+            stack.extend((value, f"{where}.{i}") for i, value in enumerate(item))
+        elif isinstance(item, int) and not isinstance(item, bool) and abs(item) > MAX_INTEGER:
+            raise ScenarioFileError(
+                f"{path}: {where or 'a key'}: an integer beyond +-1e18 (no field takes one)"
+            )
 
 
 def read_scenario_data(path: Path) -> dict[str, Any]:
@@ -133,6 +143,8 @@ def read_scenario_data(path: Path) -> dict[str, Any]:
         data = _yaml().load(text)
     except (MarkedYAMLError, YAMLError) as exc:
         raise ScenarioFileError(f"{path}: not valid YAML ({_first_line(exc)})") from None
+    except (ValueError, TypeError, OverflowError) as exc:  # a scalar the constructor cannot build
+        raise ScenarioFileError(f"{path}: a value YAML cannot read ({str(exc)[:120]})") from None
     except RecursionError:  # _check_shape bounds the depth; kept as a last line of defence
         raise ScenarioFileError(f"{path}: nested too deeply to read") from None
     if not isinstance(data, dict):

@@ -211,6 +211,10 @@ def test_arbitrary_text_after_a_valid_scenario_is_a_scenario_or_one_line(tmp_pat
         ("random_obstacles: {count: 2, x_range_m: [.nan, 1], y_range_m: [0, 1]}\n", "x_range_m.0"),
         ("drive: {max_linear_mps: .inf}\n", "drive.max_linear_mps"),
         ("drive: {colour: 1}\n", "drive.colour"),
+        ("seed: " + "1" * 5000 + "\n", "a value YAML cannot read"),
+        ("seed: 0x" + "f" * 5000 + "\n", "seed: an integer beyond"),
+        ("tau_s: !!float abc\n", "a value YAML cannot read"),
+        ("tau_s: 1e99999\n", "tau_s"),
     ],
 )
 def test_bad_files_name_the_problem(tmp_path: Path, text: str, needle: str) -> None:
