@@ -52,6 +52,13 @@ def _number_in(kind: type[int] | type[float], low: float, high: float):
     return parse
 
 
+def _path(text: str) -> str:
+    """An argparse type: a non-empty path (an empty --out would silently mean the current folder)."""
+    if not text.strip():
+        raise argparse.ArgumentTypeError("expected a path, got an empty string")
+    return text
+
+
 #: Bounds of the command line's counts: what a 2-core machine (or a cluster) can reasonably run.
 MAX_JOBS = 256
 MAX_SAMPLES = 100_000
@@ -301,13 +308,15 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--horizon", type=_horizon, default=None, help="prediction steps N in [1, 50]")
     run.add_argument("--gamma", type=_unit_float, default=None, help="CBF decay rate in [0, 1]")
     run.add_argument("--seed", type=_seed, default=None, help="noise and random-field seed")
-    run.add_argument("--out", default=None, help="output directory (default results/<run>)")
+    run.add_argument("--out", type=_path, default=None, help="output directory (default results/<run>)")
     run.add_argument("--video", action="store_true", help="then render OUT/video_CAMERA.mp4 from its trace")
     add_render_arguments(run)
     run.set_defaults(func=_cmd_run)
     render = sub.add_parser("render", help="render a recorded run directory to an MP4 (no re-solve)")
     render.add_argument("run_dir", help="a directory written by `husky-sim run` (needs its trace.npz)")
-    render.add_argument("--out", default=None, help="video file, .mp4 (default RUN_DIR/video_CAMERA.mp4)")
+    render.add_argument(
+        "--out", type=_path, default=None, help="video file, .mp4 (default RUN_DIR/video_CAMERA.mp4)"
+    )
     add_render_arguments(render)
     render.set_defaults(func=_cmd_render)
     suite = sub.add_parser("suite", help="run a scenario x controller x horizon x gamma matrix in parallel")
@@ -319,12 +328,16 @@ def build_parser() -> argparse.ArgumentParser:
     suite.add_argument("--gammas", nargs="+", type=_unit_float, default=None, help="default: file's gamma")
     suite.add_argument("--seed", type=_seed, default=None, help="seed (default: the file's)")
     suite.add_argument("--jobs", type=_jobs, default=2, help="worker processes (default 2)")
-    suite.add_argument("--out", default="results/suite", help="output directory (default results/suite)")
+    suite.add_argument(
+        "--out", type=_path, default="results/suite", help="output directory (default results/suite)"
+    )
     suite.add_argument("--quiet", action="store_true", help="no progress bar")
     suite.add_argument("--plots", action="store_true", help="also every run's own figures")
     suite.set_defaults(func=_cmd_suite)
     paper = sub.add_parser("paper", help="check the paper's claims; writes claims.md")
-    paper.add_argument("--out", default="results/paper", help="output directory (default results/paper)")
+    paper.add_argument(
+        "--out", type=_path, default="results/paper", help="output directory (default results/paper)"
+    )
     paper.add_argument("--jobs", type=_jobs, default=2, help="worker processes (default 2)")
     paper.add_argument("--quiet", action="store_true", help="no progress bar")
     paper.set_defaults(func=_cmd_paper)
@@ -367,14 +380,19 @@ def build_parser() -> argparse.ArgumentParser:
     check.add_argument(
         "--min-pass-rate", type=_unit_float, default=0.95, help="pass rate needed in [0, 1] (default 0.95)"
     )
-    check.add_argument("--out", default=None, help="output directory (default results/check__...)")
+    check.add_argument(
+        "--out", type=_path, default=None, help="output directory (default results/check__...)"
+    )
     check.set_defaults(func=_cmd_check)
     plot = sub.add_parser("plot", help="figures of runs (PNG and SVG), or tuning maps of a suite")
     plot.add_argument("run_dirs", nargs="*", metavar="RUN_DIR", help="run directories (husky-sim run --out)")
     plot.add_argument("--results", default=None, help="a suite's results.csv: gamma x N tuning maps")
     plot.add_argument("--scenario", default=None, help="with --results: only this scenario's maps")
     plot.add_argument(
-        "--out", default=None, help="output directory (default RUN_DIR/plots, or beside results.csv)"
+        "--out",
+        type=_path,
+        default=None,
+        help="output directory (default RUN_DIR/plots, or beside results.csv)",
     )
     plot.set_defaults(func=_cmd_plot)
     replay = sub.add_parser(
@@ -385,7 +403,9 @@ def build_parser() -> argparse.ArgumentParser:
     replay.add_argument(
         "--odom-topic", default="/odometry/filtered", help="nav_msgs/Odometry (default /odometry/filtered)"
     )
-    replay.add_argument("--out", default=None, help="output directory (default results/replay__<bag>)")
+    replay.add_argument(
+        "--out", type=_path, default=None, help="output directory (default results/replay__<bag>)"
+    )
     replay.add_argument(
         "--fit", action="store_true", help="fit the multiplier and ground friction not given below to the ATE"
     )

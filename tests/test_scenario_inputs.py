@@ -306,6 +306,8 @@ def test_cli_run_with_a_bad_number_exits_2_in_one_line(tmp_path: Path, path_kind
         (["check", "narrow_gap", "--horizon", "500"], "[1, 50]"),
         (["bench-sim", "--duration", "inf"], "duration"),
         (["run", "a/../../x.yaml"], "scenario"),
+        (["run", "narrow_gap", "--out", ""], "--out"),
+        (["suite", "--out", " "], "--out"),
         (["run", "x" * 300], "scenario"),
     ],
 )
