@@ -944,10 +944,11 @@ def render_run(
 
 def record_in_summary(run_dir: Path, result: RenderResult) -> None:
     """Add the render's facts under the key `video` of RUN_DIR/summary.json."""
-    path = Path(run_dir) / "summary.json"
-    summary = json.loads(path.read_text())
+    from husky_sim.run import write_summary  # the one writer of summary.json
+
+    summary = json.loads((Path(run_dir) / "summary.json").read_text())
     summary["video"] = result.as_dict()
-    path.write_text(json.dumps(summary, indent=2) + "\n")
+    write_summary(Path(run_dir), summary)
 
 
 # ------------------------------------------------------------------------------------------------- CLI

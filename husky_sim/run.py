@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import math
 import re
 import signal
 from pathlib import Path
@@ -48,11 +49,22 @@ def prepare_out_dir(out_dir: Path) -> Path:
     return out_dir
 
 
+def _json_safe(value: object) -> object:
+    """JSON has no NaN or infinity: a non-finite number (a physics blow-up) is written as null."""
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    if isinstance(value, dict):
+        return {k: _json_safe(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_json_safe(v) for v in value]
+    return value
+
+
 def write_summary(out_dir: Path, summary: dict[str, object]) -> None:
-    """summary.json, written whole even if a signal arrives meanwhile."""
+    """summary.json (strict JSON), written whole even if a signal arrives meanwhile."""
     with interrupts.deferred():
         tmp = out_dir / "summary.json.tmp"
-        tmp.write_text(json.dumps(summary, indent=2, allow_nan=False) + "\n")
+        tmp.write_text(json.dumps(_json_safe(summary), indent=2, allow_nan=False) + "\n")
         tmp.replace(out_dir / "summary.json")
 
 
