@@ -430,7 +430,16 @@ def _interrupted(signum: int) -> int:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    interrupts.install()  # first: an interrupt during start-up is honoured too
+    """Run one command; return its exit code. The signal handlers live only as long as the command
+    (a caller that runs it in-process keeps its own)."""
+    previous = interrupts.install()  # first: an interrupt during start-up is honoured too
+    try:
+        return _run_command(argv)
+    finally:
+        interrupts.restore(previous)
+
+
+def _run_command(argv: Sequence[str] | None) -> int:
     try:
         parser = build_parser()
         try:

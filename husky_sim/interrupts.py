@@ -52,13 +52,22 @@ def _handle(signum: int, _frame: object) -> None:
         raise RunInterrupted(signum)
 
 
-def install() -> None:
-    """Route SIGINT and SIGTERM to the handler above, in start-up mode (main thread only;
-    elsewhere a no-op)."""
+def install() -> dict[int, object]:
+    """Route SIGINT and SIGTERM to the handler above, in start-up mode, with nothing received yet;
+    return the handlers it replaced, for `restore` (main thread only; elsewhere a no-op)."""
+    _state.update(signum=None, defer=0, running=False)
+    previous: dict[int, object] = {}
     if threading.current_thread() is threading.main_thread():
-        _state["running"] = False
         for sig in HANDLED_SIGNALS:
-            signal.signal(sig, _handle)
+            previous[sig] = signal.signal(sig, _handle)
+    return previous
+
+
+def restore(previous: dict[int, object]) -> None:
+    """Put back the handlers `install` replaced (a command run in-process leaves no trace)."""
+    for sig, handler in previous.items():
+        signal.signal(sig, handler)
+    _state["running"] = False
 
 
 def begin_run() -> None:
