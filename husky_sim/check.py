@@ -29,7 +29,7 @@ import numpy as np
 
 from controllers import SAFETY_CONSTRAINTS, SafetyConstraint
 from husky_sim.audit import AuditThresholds, Finding, audit, measure_solve_times
-from husky_sim.scenario import Scenario, scenario_from_data
+from husky_sim.scenario import Scenario
 from husky_sim.scenario_file import scenario_yaml
 from husky_sim.sweep import (
     BACKENDS,
@@ -112,15 +112,6 @@ class CheckReport:
         return out
 
 
-def with_horizon(scenario: Scenario, horizon: int | None) -> Scenario:
-    """The scenario with its controller horizon set (validated), so saved samples carry it."""
-    if horizon is None:
-        return scenario
-    data = scenario.model_dump()
-    data["controller"]["horizon"] = horizon
-    return scenario_from_data(data, "--horizon")
-
-
 def sweep_stats(results: Sequence[dict[str, Any]]) -> dict[str, Any]:
     """Pass rate, outcome counts and the distribution of the per-sample minimum clearance (m)."""
     passed = sum(bool(r["passed"]) for r in results)
@@ -199,7 +190,7 @@ def run_check(
 ) -> CheckReport:
     """Audit, sweep, verdict; writes check.md, check.json, plots and failing samples to out_dir."""
     say = log or (lambda _msg: None)
-    base = with_horizon(scenario, options.horizon)
+    base = scenario.with_overrides(horizon=options.horizon)  # so saved samples carry it
     seed = base.seed if options.seed is None else options.seed
     say(f"audit: timing {options.timing_solves} NMPC solves on the kinematic loop ...")
     solve_times = measure_solve_times(base, options.controller, solves=options.timing_solves)

@@ -42,9 +42,7 @@ def _number_in(kind: type[int] | type[float], low: float, high: float):
         try:
             value = kind(text)
         except ValueError:
-            raise argparse.ArgumentTypeError(
-                f"expected {word} in [{low:g}, {high:g}], got {text[:40]!r}"
-            ) from None
+            raise argparse.ArgumentTypeError(f"expected {word} in {bounds}, got {text[:40]!r}") from None
         if not (math.isfinite(value) and low <= value <= high):
             raise argparse.ArgumentTypeError(f"expected {word} in {bounds}, got {value:g}")
         return value
@@ -129,7 +127,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
     from pathlib import Path
 
     from husky_sim.rendering import options_from_args, record_in_summary, render_run
-    from husky_sim.run import default_run_dir, prepare_out_dir, run_scenario
+    from husky_sim.run import default_run_dir, run_scenario
     from husky_sim.scenario import load_scenario
 
     interrupts.check()  # the imports above take a second; a signal swallowed in them ends here
@@ -138,10 +136,8 @@ def _cmd_run(args: argparse.Namespace) -> int:
     video = options_from_args(args) if args.video else None  # bad render options fail before the run
     horizon, gamma = sc.controller.horizon, sc.controller.gamma
     interrupts.begin_run()
-    out = prepare_out_dir(
-        Path(args.out) if args.out else default_run_dir(sc.name, args.controller, horizon, gamma, sc.seed)
-    )
-    summary = run_scenario(sc, args.controller, out_dir=out)
+    out = Path(args.out) if args.out else default_run_dir(sc.name, args.controller, horizon, gamma, sc.seed)
+    summary = run_scenario(sc, args.controller, out_dir=out)  # creates `out` (or one-line error) first
     clearance = summary["min_clearance_m"]
     clearance_text = "n/a" if clearance is None else f"{clearance:.3f} m"
     print(
@@ -204,6 +200,7 @@ def _cmd_check(args: argparse.Namespace) -> int:
     from pathlib import Path
 
     from husky_sim.check import CheckOptions, default_out_dir, run_check
+    from husky_sim.run import prepare_out_dir
     from husky_sim.scenario import load_scenario
 
     # integers are range-checked by CheckOptions, so "--samples 0" is one line, exit 2
@@ -218,8 +215,6 @@ def _cmd_check(args: argparse.Namespace) -> int:
         timing_solves=args.timing_solves,
         min_pass_rate=args.min_pass_rate,
     )
-    from husky_sim.run import prepare_out_dir
-
     sc = load_scenario(args.scenario)
     horizon = sc.with_overrides(horizon=args.horizon).controller.horizon  # range-checked here
     seed = sc.seed if args.seed is None else args.seed

@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import csv
 import math
-import signal
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -305,7 +304,7 @@ def _run(
                 if outcomes.stop_early:
                     break
     except (RunInterrupted, KeyboardInterrupt) as exc:  # the steps so far are kept and judged as such
-        interrupted_by = exc.signum if isinstance(exc, RunInterrupted) else int(signal.SIGINT)
+        interrupted_by = interrupts.signum_of(exc)
         outcome = "interrupted"
     metrics = summarise(
         rows,

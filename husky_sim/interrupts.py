@@ -39,6 +39,12 @@ class RunInterrupted(BaseException):
         return 128 + self.signum
 
 
+def signum_of(exc: BaseException) -> int:
+    """The signal behind an interrupt: RunInterrupted's own, SIGINT for a KeyboardInterrupt raised
+    where our handler was not in place."""
+    return exc.signum if isinstance(exc, RunInterrupted) else int(signal.SIGINT)
+
+
 def _handle(signum: int, _frame: object) -> None:
     if not _state["running"]:  # start-up: nothing written yet, nothing to save
         code = 128 + signum

@@ -16,8 +16,6 @@ from controllers.model import wrap_angle
 if TYPE_CHECKING:
     from husky_sim.episode import Outcomes
 
-OUTCOMES = ("reached", "tracking", "stuck", "collided", "timeout", "interrupted")
-
 #: What each outcome word means, for people reading results (results.md, README).
 OUTCOME_MEANINGS = {
     "reached": "the Husky held the goal (position and heading tolerances) for goal_hold_s: success",
@@ -31,6 +29,8 @@ OUTCOME_MEANINGS = {
     "interrupted": "Ctrl-C or SIGTERM ended the run early: not a result (the steps completed are kept)",
     "error": "the run crashed; the error is in the row (results.csv) and nothing was measured",
 }
+#: The outcomes an episode can have ("error" is a suite row's, not an episode's).
+OUTCOMES = tuple(o for o in OUTCOME_MEANINGS if o != "error")
 
 
 #: A command below this (m/s) counts as driving backwards.

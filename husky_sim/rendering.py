@@ -904,8 +904,8 @@ def load_run_trace(run_dir: Path) -> EpisodeTrace:
     return trace
 
 
-def _read_summary(run_dir: Path) -> dict[str, object]:
-    """The run's summary.json, or {} when it has none readable."""
+def summary_or_empty(run_dir: Path) -> dict[str, object]:
+    """The run's summary.json, or {} when it has none readable (a trace renders without it)."""
     try:
         summary = json.loads((Path(run_dir) / "summary.json").read_text())
     except (OSError, ValueError):
@@ -913,18 +913,17 @@ def _read_summary(run_dir: Path) -> dict[str, object]:
     return summary if isinstance(summary, dict) else {}
 
 
-def run_caption(run_dir: Path) -> str:
-    """'scenario controller N=..' from the run's summary.json, or '' if it has none readable."""
-    summary = _read_summary(run_dir)
+def run_caption(summary: dict[str, object]) -> str:
+    """'scenario controller N=..' from a run's summary, or '' if it does not say."""
     try:
         return f"{summary['scenario']}  {summary['controller']}  N={summary['horizon']}"
     except KeyError:
         return ""
 
 
-def run_outcome(run_dir: Path) -> str:
-    """The run's outcome ("reached", "stuck", ...) from its summary.json, or '' if unknown."""
-    outcome = _read_summary(run_dir).get("outcome")
+def run_outcome(summary: dict[str, object]) -> str:
+    """The run's outcome ("reached", "stuck", ...) from its summary, or '' if unknown."""
+    outcome = summary.get("outcome")
     return str(outcome) if outcome else ""
 
 
@@ -939,7 +938,8 @@ def render_run(
     options = options or RenderOptions()
     trace = load_run_trace(run_dir)
     out = Path(out_file) if out_file is not None else default_video_file(run_dir, options.camera)
-    return render_trace(trace, out, options, caption=run_caption(run_dir), outcome=run_outcome(run_dir))
+    summary = summary_or_empty(run_dir)  # read once, for the caption and the outcome
+    return render_trace(trace, out, options, caption=run_caption(summary), outcome=run_outcome(summary))
 
 
 def record_in_summary(run_dir: Path, result: RenderResult) -> None:

@@ -105,7 +105,7 @@ def run_scenario(
             robot_radius_m=nmpc_config.robot_radius_m,
         )
     except (RunInterrupted, KeyboardInterrupt) as exc:  # before the first control step
-        signum = exc.signum if isinstance(exc, RunInterrupted) else int(signal.SIGINT)
+        signum = interrupts.signum_of(exc)
         if out_dir is not None:
             name = signal.Signals(signum).name
             write_summary(out_dir, {**header, "outcome": "interrupted", "interrupted_by": name, "steps": 0})

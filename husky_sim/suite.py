@@ -248,9 +248,9 @@ def outcome_legend(rows: Sequence[dict[str, object]]) -> str:
     """What the outcome words in these rows mean, and why the paper's controllers deadlock."""
     from husky_sim.metrics import OUTCOME_MEANINGS
 
-    seen = sorted({str(r.get("outcome")) for r in rows}, key=list(OUTCOME_MEANINGS).index)
+    seen = {r.get("outcome") for r in rows}
     lines = ["## What the outcomes mean", ""]
-    lines += [f"- `{o}`: {OUTCOME_MEANINGS[o]}" for o in seen if o in OUTCOME_MEANINGS]
+    lines += [f"- `{o}`: {meaning}" for o, meaning in OUTCOME_MEANINGS.items() if o in seen]
     stuck_paper = [
         r for r in rows if r.get("outcome") == "stuck" and r.get("controller") in SUITE_CONTROLLERS
     ]

@@ -42,35 +42,40 @@ def _run_cli(args: list[str]) -> subprocess.Popen:
 
 @pytest.mark.slow
 def test_signals_at_random_instants_end_the_run_as_interrupted(tmp_path: Path) -> None:
-    """Seeded random instants, from start-up to the middle of the closed loop (the 30 s tracking
-    episode at N = 5 never stops early and runs 5 to 10 s here, so every signal lands before it
-    ends)."""
+    """Seeded random instants: some in start-up (counted from launch), most in the closed loop
+    (counted from the first logged step, so a slow machine cannot turn them into start-up cases;
+    the 30 s tracking episode at N = 5 never stops early and runs 150 steps, several seconds)."""
     rng = random.Random(2026)
-    cases = [(signal.SIGINT, rng.uniform(0.2, 3.5)) for _ in range(4)]
-    cases += [(signal.SIGTERM, rng.uniform(0.2, 3.5)), (signal.SIGINT, 2.5)]
-    for i, (sig, delay_s) in enumerate(cases):
+    cases = [(signal.SIGINT, "start-up", rng.uniform(0.05, 0.6)), (signal.SIGTERM, "start-up", 0.3)]
+    cases += [(signal.SIGINT, "loop", rng.uniform(0.0, 2.0)) for _ in range(3)]
+    cases += [(signal.SIGTERM, "loop", rng.uniform(0.0, 2.0))]
+    for i, (sig, phase, delay_s) in enumerate(cases):
         out = tmp_path / f"run_{i}"
+        log = out / "log.csv"
         proc = _run_cli(["run", "husky_circle_tracking", "--horizon", "5", "--out", str(out)])
+        if phase == "loop":
+            deadline = time.monotonic() + 120.0
+            while time.monotonic() < deadline and (not log.exists() or log.read_text().count("\n") < 2):
+                time.sleep(0.02)  # the header and one control step are written
         time.sleep(delay_s)
         sent = time.monotonic()
         proc.send_signal(sig)
         _, err = proc.communicate(timeout=60)
         took_s = time.monotonic() - sent
-        label = f"{sig.name} after {delay_s:.2f} s"
+        label = f"{sig.name} {delay_s:.2f} s into {phase}"
         # 128 + n through our handler; -n if the signal came before Python ran our code at all
         assert proc.returncode in (128 + sig, -sig), f"{label}: exit {proc.returncode}\n{err}"
         assert took_s < 1.0, f"{label}: took {took_s:.2f} s to stop"
         summary_path = out / "summary.json"
-        if summary_path.exists():
+        if phase == "loop" or summary_path.exists():
             summary = json.loads(summary_path.read_text())
             assert summary["outcome"] == "interrupted" and summary["interrupted_by"] == sig.name, label
-            assert summary["converged"] is False if "converged" in summary else True
-            rows = list(csv.DictReader((out / "log.csv").open())) if (out / "log.csv").exists() else []
+            assert summary.get("converged", False) is False, label
+            rows = list(csv.DictReader(log.open())) if log.exists() else []
             assert len(rows) == summary["steps"], label  # every completed step logged whole, no more
-            assert all(r["fallback"] == "none" or r["status"] != "NonIpopt_Exception_Thrown" for r in rows)
+            assert all(r["status"] != "NonIpopt_Exception_Thrown" for r in rows), label
         else:  # interrupted before the run folder existed: nothing that could pass for a result
-            assert not (out / "log.csv").exists(), label
-    assert any((tmp_path / f"run_{i}" / "summary.json").exists() for i in range(len(cases)))
+            assert not log.exists(), label
 
 
 @pytest.mark.slow

@@ -325,3 +325,11 @@ def test_cli_out_must_be_a_creatable_directory(tmp_path: Path) -> None:
     assert code == 2 and "--out" in err and len(err.strip().splitlines()) == 1
     code, _, err = _run_cli(["suite", "--scenarios", "narrow_gap", "--out", str(existing)])
     assert code == 2 and "--out" in err
+
+
+def test_cli_controller_choices_are_the_controllers_packages() -> None:
+    """The CLI names them without importing CasADi before its signal handlers; they must not drift."""
+    from controllers import SAFETY_CONSTRAINTS
+    from husky_sim.cli import CONTROLLER_CHOICES
+
+    assert CONTROLLER_CHOICES == SAFETY_CONSTRAINTS
