@@ -4,6 +4,7 @@ This package never imports the simulator; a simulator uses `Controller` from `in
 """
 
 from controllers.config import (
+    CONTROLLER_NAMES,
     HUSKY_EXPERIMENT,
     SAFETY_CONSTRAINTS,
     ConfigError,
@@ -17,6 +18,7 @@ from controllers.obstacles import Obstacle
 from controllers.references import CircleTrajectory, Reference, SetPoint, Trajectory
 
 __all__ = [
+    "CONTROLLER_NAMES",
     "HUSKY_EXPERIMENT",
     "SAFETY_CONSTRAINTS",
     "CircleTrajectory",

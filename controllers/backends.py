@@ -110,12 +110,44 @@ WARM_START_OPTIONS = {
 }
 
 
-class NlpsolBackend:
-    """IPOPT through `nlpsol`, built once per configuration; a solve is one function call.
+class IpoptSolver:
+    """One NLP solved by IPOPT through `nlpsol`, built once; a solve is one function call.
 
-    Two solvers share the NLP: a cold one (IPOPT defaults) for the first step and after a
-    failure, and a warm one seeded with the last successful solve's multipliers.
+    Two solvers share the NLP: a cold one (IPOPT defaults) for the first solve and after a
+    failure or `reset`, and a warm one seeded with the last successful solve's multipliers.
     """
+
+    def __init__(
+        self,
+        name: str,
+        nlp: dict[str, ca.SX],
+        bounds: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray],
+        options: SolverOptions,
+    ) -> None:
+        self._bounds = dict(zip(("lbx", "ubx", "lbg", "ubg"), bounds, strict=True))
+        ipopt = ipopt_options(options)
+        self._cold = ca.nlpsol(f"{name}_cold", "ipopt", nlp, ipopt)
+        self._warm = ca.nlpsol(f"{name}_warm", "ipopt", nlp, {**ipopt, **WARM_START_OPTIONS})
+        self._multipliers: dict[str, ca.DM] | None = None
+
+    def reset(self) -> None:
+        """Forget the multipliers (next solve is cold)."""
+        self._multipliers = None
+
+    def solve(self, parameters: np.ndarray, guess: np.ndarray) -> RawSolution:
+        if self._multipliers is None:
+            solver, out = self._cold, self._cold(x0=guess, p=parameters, **self._bounds)
+        else:
+            solver = self._warm
+            out = solver(x0=guess, p=parameters, **self._bounds, **self._multipliers)
+        decision = np.asarray(out["x"], dtype=float).reshape(-1)
+        result = _finish(decision, solver.stats())
+        self._multipliers = {"lam_x0": out["lam_x"], "lam_g0": out["lam_g"]} if result.success else None
+        return result
+
+
+class NlpsolBackend:
+    """The paper's OCP solved by IPOPT through `nlpsol` (IpoptSolver), built once per configuration."""
 
     name = "nlpsol"
 
@@ -125,30 +157,18 @@ class NlpsolBackend:
         expr = problem.expressions
         g = ca.vertcat(expr.equalities, expr.clf, expr.safety)
         n_eq, n_ineq = expr.equalities.numel(), expr.clf.numel() + expr.safety.numel()
-        self._lbg = np.concatenate([np.zeros(n_eq), np.zeros(n_ineq)])
-        self._ubg = np.concatenate([np.zeros(n_eq), np.full(n_ineq, np.inf)])
-        self._lbx, self._ubx = decision_bounds(config, self.layout)
+        lbg = np.concatenate([np.zeros(n_eq), np.zeros(n_ineq)])
+        ubg = np.concatenate([np.zeros(n_eq), np.full(n_ineq, np.inf)])
+        lbx, ubx = decision_bounds(config, self.layout)
         nlp = {"x": problem.decision, "p": problem.parameters, "f": expr.cost, "g": g}
-        options = ipopt_options(config.solver)
-        self._cold = ca.nlpsol("nmpc_cold", "ipopt", nlp, options)
-        self._warm = ca.nlpsol("nmpc_warm", "ipopt", nlp, {**options, **WARM_START_OPTIONS})
-        self._multipliers: dict[str, ca.DM] | None = None
+        self._solver = IpoptSolver("nmpc", nlp, (lbx, ubx, lbg, ubg), config.solver)
 
     def reset(self) -> None:
         """Forget the multipliers (next solve is cold)."""
-        self._multipliers = None
+        self._solver.reset()
 
     def solve(self, parameters: np.ndarray, guess: np.ndarray) -> RawSolution:
-        bounds = dict(lbx=self._lbx, ubx=self._ubx, lbg=self._lbg, ubg=self._ubg)
-        if self._multipliers is None:
-            solver, out = self._cold, self._cold(x0=guess, p=parameters, **bounds)
-        else:
-            solver = self._warm
-            out = solver(x0=guess, p=parameters, **bounds, **self._multipliers)
-        decision = np.asarray(out["x"], dtype=float).reshape(-1)
-        result = _finish(decision, solver.stats())
-        self._multipliers = {"lam_x0": out["lam_x"], "lam_g0": out["lam_g"]} if result.success else None
-        return result
+        return self._solver.solve(parameters, guess)
 
 
 class OptiBackend:

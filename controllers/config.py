@@ -19,6 +19,9 @@ SafetyConstraint = Literal["none", "bt", "cbf", "relax-cbf"]
 #: Obstacle constraint variants, in the order the paper compares them (plus the unconstrained baseline).
 SAFETY_CONSTRAINTS: tuple[SafetyConstraint, ...] = ("none", "bt", "cbf", "relax-cbf")
 
+#: Every controller a simulator may choose: the paper's variants and ours (controllers.husky_cbf).
+CONTROLLER_NAMES: tuple[str, ...] = (*SAFETY_CONSTRAINTS, "husky-cbf")
+
 ObstaclePrediction = Literal["constant-velocity", "frozen"]
 OBSTACLE_PREDICTIONS: tuple[ObstaclePrediction, ...] = ("constant-velocity", "frozen")
 

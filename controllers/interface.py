@@ -37,6 +37,9 @@ class ControlResult:
     solve_time_s: float  # wall time of the whole `solve` call (s)
     obstacles_considered: int  # obstacles in the NLP this step (<= obstacle slots)
     obstacles_ignored: int  # obstacles dropped because more than the slots were given
+    recovered_by: str = ""  # the retry guess that solved after a failed solve (controllers.recovery)
+    soft_constraint: bool = False  # solved only with the obstacle constraint's exact-penalty slack
+    guided: bool = False  # tracked a guidance waypoint instead of the reference (path blocked)
 
     @property
     def is_fallback(self) -> bool:

@@ -3,12 +3,14 @@
 Per step: sample the reference along the horizon, predict the obstacles, warm-start IPOPT from
 the previous plan shifted by one step (s_h guess 1), solve, apply the first control.
 
-Fallback when IPOPT fails (infeasible, iteration or time limit, non-finite numbers, exception):
-the next control of the last solved plan, if that plan's remaining states are still collision-free
-against the obstacles as now predicted; otherwise a braking command v = 0, omega = 0. The result
-is marked as a fallback and the loop goes on; `solve` never raises for a solver failure. A signal
-(Ctrl-C, SIGTERM) during a solve is not a failure: it reaches the program's handler
-(controllers.signals).
+When IPOPT fails (infeasible, iteration or time limit, non-finite numbers, exception), the same
+NLP is solved again cold from the alternative guesses of controllers.recovery (braking, previous
+plan, reversing, straight line), and the first that succeeds is used and counted (`recovered_by`).
+Fallback when all of them fail: the next control of the last solved plan, if that plan's remaining
+states are still collision-free against the obstacles as now predicted; otherwise a braking
+command v = 0, omega = 0. The result is marked as a fallback and the loop goes on; `solve` never
+raises for a solver failure. A signal (Ctrl-C, SIGTERM) during a solve is not a failure: it
+reaches the program's handler (controllers.signals).
 """
 
 from __future__ import annotations
@@ -22,8 +24,10 @@ import numpy as np
 from controllers.backends import BACKENDS, RawSolution, sx_problem
 from controllers.config import NMPCConfig
 from controllers.interface import ControlResult, FallbackKind
+from controllers.model import step
 from controllers.obstacles import Obstacle, predict_obstacles
 from controllers.ocp import OCPParameters, Plan
+from controllers.recovery import recovery_commands
 from controllers.references import Reference
 from controllers.signals import deliver_after_solve
 
@@ -124,6 +128,10 @@ class NMPCController:
                 raw = self._backend.solve(p_vec, guess.to_vector(self._layout))
             except Exception as exc:  # noqa: BLE001 - a control loop must survive any solver error
                 raw = RawSolution(guess.to_vector(self._layout), False, f"exception: {exc}", -1)
+        recovered_by = ""
+        if not raw.success:
+            retry, recovered_by = self._retry(state, params, p_vec)
+            raw = retry or raw
         if raw.success:
             plan, fallback = Plan.from_vector(raw.decision, self._layout), "none"
             self._plan, self._plan_age = plan, 0
@@ -151,7 +159,39 @@ class NMPCController:
             solve_time_s=time.perf_counter() - start,
             obstacles_considered=n_real,
             obstacles_ignored=ignored,
+            recovered_by=recovered_by,
         )
+
+    def _retry(
+        self, state: np.ndarray, params: OCPParameters, p_vec: np.ndarray
+    ) -> tuple[RawSolution | None, str]:
+        """Cold re-solves from the recovery guesses; the first success and its guess's name."""
+        cfg = self.config
+        previous = self._plan.shifted(self._plan_age + 1).controls if self._plan is not None else None
+        candidates = recovery_commands(
+            state,
+            params.ref_states[-1],
+            previous,
+            cfg.horizon,
+            cfg.tau_s,
+            (cfg.v_min_mps, cfg.v_max_mps),
+            cfg.omega_max_radps,
+        )
+        for name, commands in candidates:
+            states = [state]
+            for command in commands:
+                states.append(step(states[-1], command, cfg.tau_s))
+            n = cfg.horizon
+            guess = Plan(np.array(states), commands.copy(), np.zeros(n), np.ones(n)).to_vector(self._layout)
+            self._backend.reset()
+            with deliver_after_solve():
+                try:
+                    raw = self._backend.solve(p_vec, guess)
+                except Exception:  # noqa: BLE001 - try the next guess
+                    continue
+            if raw.success:
+                return raw, name
+        return None, ""
 
     def _result_without_plan(
         self, state: np.ndarray, n_real: int, ignored: int, start: float, status: str

@@ -24,7 +24,7 @@ from typing import Literal
 
 import numpy as np
 
-from controllers import NMPCController, Obstacle, SafetyConstraint
+from controllers import Obstacle
 from husky_sim import husky_specs as specs
 from husky_sim.drive import DriveConfig
 from husky_sim.kinematic import run_kinematic
@@ -236,12 +236,11 @@ def kinematic_obstacles(scenario: Scenario) -> list[Obstacle]:
 
 
 def measure_solve_times(
-    scenario: Scenario, controller: SafetyConstraint, horizon: int | None = None, solves: int = 100
+    scenario: Scenario, controller: str, horizon: int | None = None, solves: int = 100
 ) -> np.ndarray:
     """Wall times (s) of `solves` NMPC solves on the scenario's kinematic closed loop on this
     machine; the loop restarts from the start pose when a set-point is reached early."""
-    config = scenario.controller_config(controller, horizon)
-    nmpc = NMPCController(config)
+    nmpc = scenario.make_controller(controller, horizon)
     obstacles = kinematic_obstacles(scenario)
     start = (scenario.robot.start.x_m, scenario.robot.start.y_m, scenario.robot.start.yaw_rad)
     times: list[float] = []
@@ -252,9 +251,9 @@ def measure_solve_times(
             start,
             scenario.reference_object(),
             obstacles,
-            config.tau_s,
-            remaining * config.tau_s,
-            config.robot_radius_m,
+            scenario.tau_s,
+            remaining * scenario.tau_s,
+            scenario.robot.radius(),
         )
         times.extend(episode.solve_time_s.tolist())
     return np.array(times[:solves])

@@ -27,7 +27,7 @@ from typing import Any
 
 import numpy as np
 
-from controllers import SAFETY_CONSTRAINTS, SafetyConstraint
+from controllers import CONTROLLER_NAMES
 from husky_sim.audit import AuditThresholds, Finding, audit, measure_solve_times
 from husky_sim.scenario import Scenario
 from husky_sim.scenario_file import scenario_yaml
@@ -52,7 +52,7 @@ MD_SAMPLE_ROWS = 200
 class CheckOptions:
     """What to check and how; validated on construction (a bad value is a one-line ValueError)."""
 
-    controller: SafetyConstraint = "relax-cbf"
+    controller: str = "relax-cbf"  # controllers.CONTROLLER_NAMES
     horizon: int | None = None  # None: the scenario's
     samples: int = 32  # K perturbed runs
     seed: int | None = None  # perturbation sampling seed; None: the scenario's seed
@@ -65,8 +65,8 @@ class CheckOptions:
     thresholds: AuditThresholds = field(default_factory=AuditThresholds)
 
     def __post_init__(self) -> None:
-        if self.controller not in SAFETY_CONSTRAINTS:
-            raise ValueError(f"controller: must be one of {SAFETY_CONSTRAINTS}, got {self.controller!r}")
+        if self.controller not in CONTROLLER_NAMES:
+            raise ValueError(f"controller: must be one of {CONTROLLER_NAMES}, got {self.controller!r}")
         for name in ("samples", "timing_solves"):
             if getattr(self, name) < 1:
                 raise ValueError(f"{name}: must be >= 1, got {getattr(self, name)}")

@@ -25,7 +25,10 @@ Divergence (at the recorded pose times; the simulated pose is interpolated betwe
 `--fit` searches the effective wheel-separation multiplier and the ground friction coefficient
 that minimise the ATE (a coarse grid, then a 3 x 3 pattern search with halving steps; see `fit`)
 and prints them as scenario parameters. A parameter given on the command line is held, and only
-the other one is fitted.
+the other one is fitted. It also fits the recording's yaw-rate lag (husky_sim.yaw_response: the
+recorded commands through the drive's limits against the recorded yaw rate, from the odometry twist
+when the recording has a non-zero one, else from the differentiated yaw) and prints it as
+`robot: yaw_response` scenario parameters.
 """
 
 from __future__ import annotations
@@ -43,6 +46,7 @@ from controllers.model import wrap_angle
 from husky_sim.drive import DriveConfig, SkidSteerDrive
 from husky_sim.robot import HuskyRobot, WheelFriction
 from husky_sim.world import World, WorldConfig
+from husky_sim.yaw_response import YawResponse, fit_yaw_response, interval_means
 
 CSV_COLUMNS = ("t", "v", "omega", "x", "y", "theta")
 TWIST_TYPES = ("geometry_msgs/msg/Twist", "geometry_msgs/msg/TwistStamped")
@@ -134,12 +138,19 @@ class SimParams:
     def drive(self) -> DriveConfig:
         return DriveConfig(wheel_separation_multiplier=self.wheel_separation_multiplier)
 
-    def scenario_yaml(self) -> str:
-        """The parameters as a scenario snippet (husky_sim.scenario: drive, friction.ground)."""
-        return (
+    def scenario_yaml(self, yaw_response: YawResponse | None = None) -> str:
+        """The parameters as a scenario snippet (husky_sim.scenario: drive, friction.ground, and
+        robot.yaw_response when one is given)."""
+        text = (
             f"drive: {{wheel_separation_multiplier: {self.wheel_separation_multiplier:.4g}}}\n"
             f"friction: {{ground: {self.ground_friction:.4g}}}"
         )
+        if yaw_response is not None:
+            text += (
+                f"\nrobot: {{yaw_response: {{gain: {yaw_response.gain:.4g}, "
+                f"time_constant_s: {yaw_response.time_constant_s:.4g}}}}}"
+            )
+        return text
 
 
 # --------------------------------------------------------------------------------------------
@@ -156,6 +167,7 @@ class Recording:
     commands: np.ndarray  # (n, 2) v (m/s), omega (rad/s)
     pose_t_s: np.ndarray  # (m,) s, sorted, pose_t_s[0] == 0
     poses: np.ndarray  # (m, 3) x (m), y (m), yaw (rad)
+    yaw_rates: np.ndarray | None = None  # (m,) odometry twist yaw rate (rad/s) at pose_t_s, if recorded
 
     @property
     def start(self) -> tuple[float, float, float]:
@@ -182,10 +194,15 @@ def make_recording(
     commands: Sequence[Sequence[float]],
     pose_t_s: Sequence[float],
     poses: Sequence[Sequence[float]],
+    yaw_rates: Sequence[float] | None = None,
 ) -> Recording:
-    """Validate and sort a recording; times are shifted so that the first pose is at t = 0."""
+    """Validate and sort a recording; times are shifted so that the first pose is at t = 0.
+    `yaw_rates` (rad/s), if given, are the odometry's twist yaw rates, one per pose."""
     cmd_t, cmd = np.asarray(cmd_t_s, dtype=float), np.asarray(commands, dtype=float).reshape(-1, 2)
     pose_t, pose = np.asarray(pose_t_s, dtype=float), np.asarray(poses, dtype=float).reshape(-1, 3)
+    rates = None if yaw_rates is None else np.asarray(yaw_rates, dtype=float).reshape(-1)
+    if rates is not None and (len(rates) != len(pose_t) or not np.all(np.isfinite(rates))):
+        raise ReplayError(f"{source}: odometry yaw rates must be finite, one per pose")
     if len(cmd_t) == 0:
         raise ReplayError(f"{source}: no velocity commands")
     if len(pose_t) < 2:
@@ -203,7 +220,15 @@ def make_recording(
         raise ReplayError(
             f"{source}: the recorded poses span {span_s:.4g} s; at most {MAX_RECORDING_S:g} s can be replayed"
         )
-    return Recording(source, fmt, cmd_t[c_order] - t0, cmd[c_order], pose_t[p_order] - t0, pose[p_order])
+    return Recording(
+        source,
+        fmt,
+        cmd_t[c_order] - t0,
+        cmd[c_order],
+        pose_t[p_order] - t0,
+        pose[p_order],
+        None if rates is None else rates[p_order],
+    )
 
 
 def _float_cell(row: dict[str, str], column: str, line: int, source: str) -> float | None:
@@ -265,7 +290,7 @@ def _topic_connections(reader: object, source: str, topic: str, types: Sequence[
 def _read_bag_messages(path: Path, source: str, cmd_topic: str, odom_topic: str) -> Recording:
     from rosbags.highlevel import AnyReader
 
-    cmd_t, cmds, pose_t, poses = [], [], [], []
+    cmd_t, cmds, pose_t, poses, yaw_rates = [], [], [], [], []
     with AnyReader([path]) as reader:
         fmt = "ros2" if reader.is2 else "ros1"
         cmd_conns = _topic_connections(reader, source, cmd_topic, TWIST_TYPES)
@@ -283,11 +308,12 @@ def _read_bag_messages(path: Path, source: str, cmd_topic: str, odom_topic: str)
                 pose = msg.pose.pose
                 pose_t.append(t_s)
                 poses.append((pose.position.x, pose.position.y, _yaw(pose.orientation)))
+                yaw_rates.append(msg.twist.twist.angular.z)
     if not cmds:
         raise ReplayError(f"{source}: no messages on {cmd_topic!r}")
     if not poses:
         raise ReplayError(f"{source}: no messages on {odom_topic!r}")
-    return make_recording(source, fmt, cmd_t, cmds, pose_t, poses)
+    return make_recording(source, fmt, cmd_t, cmds, pose_t, poses, yaw_rates)
 
 
 def read_bag(path: Path, cmd_topic: str = "/cmd_vel", odom_topic: str = "/odometry/filtered") -> Recording:
@@ -470,13 +496,75 @@ def fit(
 
 
 # --------------------------------------------------------------------------------------------
+# yaw-rate lag of the recording
+
+
+@dataclass(frozen=True)
+class YawFit:
+    """The recording's yaw-rate lag (husky_sim.yaw_response) and how it was measured."""
+
+    response: YawResponse
+    rms_error_radps: float  # rms of simulated lag - recorded yaw rate (rad/s)
+    source: str  # "odometry twist" or "differentiated yaw"
+    samples: int  # recorded yaw-rate samples fitted
+
+    def summary(self) -> dict[str, object]:
+        return {**asdict(self.response), **{k: v for k, v in asdict(self).items() if k != "response"}}
+
+    def line(self) -> str:
+        r = self.response
+        return (
+            f"yaw-rate lag of the recording ({self.samples} samples, yaw rate from the {self.source}): "
+            f"gain {r.gain:.3f}, time constant {r.time_constant_s:.3f} s, rms error "
+            f"{self.rms_error_radps:.4f} rad/s"
+        )
+
+
+def recorded_yaw_rate(recording: Recording) -> tuple[np.ndarray, np.ndarray, str]:
+    """Times (s, strictly increasing), recorded body yaw rate (rad/s) and where it came from: the
+    odometry twist when the recording has one that is not all zeros (a recorder that leaves the
+    twist empty), else the central difference of the unwrapped recorded yaw."""
+    keep = np.concatenate([[True], np.diff(recording.pose_t_s) > 0])
+    t = recording.pose_t_s[keep]
+    if recording.yaw_rates is not None and np.any(recording.yaw_rates[keep] != 0):
+        return t, recording.yaw_rates[keep], "odometry twist"
+    return t, np.gradient(np.unwrap(recording.poses[keep, 2]), t), "differentiated yaw"
+
+
+def applied_yaw_rate(recording: Recording, t_s: np.ndarray, params: SimParams) -> np.ndarray:
+    """The recorded commands held, through the drive's velocity and acceleration limits at the
+    physics rate (as the simulation applies them), averaged over each [t_s[k], t_s[k+1]) (rad/s)."""
+    dt_s = 1.0 / params.physics_hz
+    fine_t = np.arange(math.ceil(t_s[-1] / dt_s - 1e-9) + 1) * dt_s
+    drive = SkidSteerDrive(params.drive(), 1.0, 1.0)  # only limit() is used: no wheel geometry
+    held = held_commands(recording.cmd_t_s, recording.commands, fine_t)
+    applied = np.array([drive.limit(command, dt_s)[1] for command in held])
+    return interval_means(fine_t, applied, t_s)
+
+
+def fit_recording_yaw(recording: Recording, params: SimParams | None = None) -> YawFit:
+    """Fit the yaw-rate lag to the recording: applied (limited) commanded yaw rate against the
+    recorded yaw rate, at the recorded pose times. ValueError when the recording never turns."""
+    params = params or SimParams()
+    t, measured, source = recorded_yaw_rate(recording)
+    response, rms_error = fit_yaw_response(t, applied_yaw_rate(recording, t, params), measured)
+    return YawFit(response, rms_error, source, len(t))
+
+
+# --------------------------------------------------------------------------------------------
 # outputs
 
 
 def summary_dict(
-    recording: Recording, runs: dict[str, ReplayRun], fitted: FitResult | None, inputs: dict[str, object]
+    recording: Recording,
+    runs: dict[str, ReplayRun],
+    fitted: FitResult | None,
+    inputs: dict[str, object],
+    yaw: YawFit | None = None,
 ) -> dict[str, object]:
-    """The JSON summary: inputs, the recording's extent, and each run's parameters and divergence."""
+    """The JSON summary: inputs, the recording's extent, each run's parameters and divergence, and
+    with a fit, the fitted parameters and the recording's yaw-rate lag (`fit.yaw_response`, null
+    when the recording never turns)."""
     summary: dict[str, object] = {
         "source": recording.source,
         **inputs,
@@ -494,7 +582,8 @@ def summary_dict(
             "simulations": len(fitted.evaluations),
             "near_best_multiplier": [m_lo, m_hi],
             "near_best_ground_friction": [mu_lo, mu_hi],
-            "scenario_yaml": fitted.best.params.scenario_yaml(),
+            "yaw_response": None if yaw is None else yaw.summary(),
+            "scenario_yaml": fitted.best.params.scenario_yaml(None if yaw is None else yaw.response),
         }
     return summary
 
@@ -552,15 +641,19 @@ def run_replay(
         f"replay (multiplier {params.wheel_separation_multiplier:g}, ground friction "
         f"{params.ground_friction:g}): {runs['replay'].divergence.line()}"
     )
-    fitted = None
+    fitted, yaw = None, None
     if do_fit:
         free_m, free_mu = multiplier is None, ground_friction is None
         fitted = fit(recording, params, fit_multiplier=free_m, fit_friction=free_mu)
         runs["fit"] = fitted.best
-        lines += _fit_lines(fitted, free_m, free_mu)
+        try:
+            yaw = fit_recording_yaw(recording, params)
+        except ValueError as exc:  # a recording that never turns: the lag is not identified
+            lines.append(f"yaw-rate lag not identified ({_one_line(exc)})")
+        lines += _fit_lines(fitted, free_m, free_mu, yaw)
     try:
         out_dir.mkdir(parents=True, exist_ok=True)
-        _write_outputs(out_dir, recording, runs, fitted, cmd_topic, odom_topic)
+        _write_outputs(out_dir, recording, runs, fitted, cmd_topic, odom_topic, yaw)
     except OSError as exc:
         raise ReplayError(f"{out_dir}: cannot write the outputs ({exc})") from None
     lines.append(f"wrote {out_dir / SUMMARY_NAME} and {out_dir / PLOT_NAME}")
@@ -574,16 +667,23 @@ def _write_outputs(
     fitted: FitResult | None,
     cmd_topic: str,
     odom_topic: str,
+    yaw: YawFit | None = None,
 ) -> None:
     inputs = {"format": recording.format}
     if recording.format != "csv":
         inputs.update(cmd_topic=cmd_topic, odom_topic=odom_topic)
-    summary = summary_dict(recording, runs, fitted, inputs)
+    summary = summary_dict(recording, runs, fitted, inputs, yaw)
     (out_dir / SUMMARY_NAME).write_text(json.dumps(summary, indent=2) + "\n")
     plot_replay(recording, runs, out_dir / PLOT_NAME)
 
 
-def _fit_lines(fitted: FitResult, fit_multiplier: bool, fit_friction: bool) -> list[str]:
+def _one_line(exc: Exception) -> str:
+    return " ".join(str(exc).split())
+
+
+def _fit_lines(
+    fitted: FitResult, fit_multiplier: bool, fit_friction: bool, yaw: YawFit | None = None
+) -> list[str]:
     best = fitted.best
     m_lo, m_hi, mu_lo, mu_hi = fitted.near_best()
     names = (("wheel-separation multiplier", fit_multiplier), ("ground friction", fit_friction))
@@ -594,6 +694,9 @@ def _fit_lines(fitted: FitResult, fit_multiplier: bool, fit_friction: bool) -> l
             f"  simulations within 1.25 x the best ATE + 5 mm span multiplier {m_lo:.4g}-{m_hi:.4g} and "
             f"ground friction {mu_lo:.4g}-{mu_hi:.4g} (the two trade off: give one to fit only the other)"
         )
+    if yaw is not None:
+        lines.append(yaw.line())
     lines.append("scenario parameters:")
-    lines += ["  " + line for line in best.params.scenario_yaml().splitlines()]
+    yaml_text = best.params.scenario_yaml(None if yaw is None else yaw.response)
+    lines += ["  " + line for line in yaml_text.splitlines()]
     return lines

@@ -73,6 +73,9 @@ class RobotGeometry:
             (the larger of the +/- sides), m.
         footprint_radius_m: radius of the smallest circle centred at the base_link origin
             enclosing the ground projection of every collision shape, wheels included, m.
+        footprint_half_extents_m: (half length along x, half width along y) of the ground
+            projection of every collision shape, wheels included, about the base_link origin
+            (the larger of the +/- sides), m: the rectangle husky-cbf covers with discs.
         base_height_m: height of the base_link origin above flat ground when all wheels
             touch it (wheel radius minus mean wheel-centre z), m.
         ground_clearance_m: height of the lowest base_link collision point above flat
@@ -89,6 +92,7 @@ class RobotGeometry:
     wheelbase_m: float
     chassis_half_extents_m: tuple[float, float]
     footprint_radius_m: float
+    footprint_half_extents_m: tuple[float, float]
     base_height_m: float
     ground_clearance_m: float
     wheels: tuple[WheelGeometry, ...]
@@ -177,6 +181,13 @@ def _footprint_radius(urdf: yourdfpy.URDF, base_link: str) -> float:
     return radius
 
 
+def _footprint_half_extents(urdf: yourdfpy.URDF, base_link: str) -> tuple[float, float]:
+    """Max |x| and max |y| (m) in base_link over every link's collision shapes."""
+    points = [p for name in urdf.link_map for p in _collision_points(urdf, name, base_link)]
+    stacked = np.vstack(points)
+    return float(np.max(np.abs(stacked[:, 0]))), float(np.max(np.abs(stacked[:, 1])))
+
+
 def _find_wheels(urdf: yourdfpy.URDF, base_link: str) -> tuple[WheelGeometry, ...]:
     """Wheels: children of continuous/revolute joints with a cylinder collision."""
     wheels: list[WheelGeometry] = []
@@ -263,6 +274,7 @@ def load_geometry(urdf_path: Path | None = None) -> RobotGeometry:
         wheelbase_m=wheelbase,
         chassis_half_extents_m=half_extents,
         footprint_radius_m=_footprint_radius(urdf, base_link),
+        footprint_half_extents_m=_footprint_half_extents(urdf, base_link),
         base_height_m=base_height,
         ground_clearance_m=clearance,
         wheels=wheels,

@@ -8,7 +8,7 @@ import re
 import signal
 from pathlib import Path
 
-from controllers import NMPCController, SafetyConstraint
+from controllers import SAFETY_CONSTRAINTS, NMPCController, SafetyConstraint
 from husky_sim import interrupts
 from husky_sim.episode import run_episode
 from husky_sim.interrupts import RunInterrupted
@@ -78,7 +78,8 @@ def run_scenario(
 ) -> dict[str, object]:
     """Run a scenario; return the summary (also written to out_dir/summary.json, with the log)."""
     sc = load_scenario(scenario) if isinstance(scenario, str) else scenario
-    nmpc_config = sc.controller_config(controller, horizon, gamma)
+    nmpc = sc.make_controller(controller, horizon, gamma)
+    nmpc_config = getattr(nmpc.config, "nmpc", nmpc.config)  # husky-cbf: its paper part
     episode_config = sc.episode_config(seed)
     header: dict[str, object] = {
         "scenario": sc.name,
@@ -91,14 +92,14 @@ def run_scenario(
         "prediction_time_s": nmpc_config.horizon * nmpc_config.tau_s,
         "v_min_mps": nmpc_config.v_min_mps,
         "v_max_mps": nmpc_config.v_max_mps,
-        "omega_max_radps": nmpc_config.omega_max_radps,
+        "omega_max_radps": getattr(nmpc.config, "omega_cmd_max_radps", nmpc_config.omega_max_radps),
     }
     if out_dir is not None:
         prepare_out_dir(out_dir)
     log_path = out_dir / "log.csv" if out_dir is not None else None
     try:
         result = run_episode(
-            NMPCController(nmpc_config),
+            nmpc,
             sc.reference_object(),
             episode_config,
             log_path,
@@ -141,9 +142,18 @@ def run_scenario_kinematic(
 
     from controllers import Obstacle, SetPoint
     from husky_sim.kinematic import GoalTolerance, run_kinematic
-    from husky_sim.metrics import count_reversals, is_idle, tracking_rmse
+    from husky_sim.metrics import (
+        NO_TRACKING_FIELDS,
+        count_reversals,
+        is_idle,
+        judge_tracking,
+        reference_reachable,
+        tracking_rmse,
+    )
 
     sc = load_scenario(scenario) if isinstance(scenario, str) else scenario
+    if controller not in SAFETY_CONSTRAINTS:
+        raise ValueError(f"controller: the kinematic loop runs {SAFETY_CONSTRAINTS}, got {controller!r}")
     config = sc.controller_config(controller, horizon, gamma)
     if robot_radius_m is not None:
         config = replace(config, robot_radius_m=robot_radius_m)
@@ -180,11 +190,21 @@ def run_scenario_kinematic(
         outcome = "stuck"
     else:
         outcome = "timeout" if is_setpoint else "tracking"
-    converged = (
-        outcome == "reached"
-        if is_setpoint
-        else (outcome == "tracking" and rmse is not None and rmse <= s.tracking_rmse_m)
-    )
+    judgement = None
+    if not is_setpoint:
+        # the robot here is the controller's circle (config.robot_radius_m), not the URDF footprint:
+        # it is the body this model's clearance and collisions are measured on, so a reference point
+        # is reachable exactly when that body could stand on it without collision
+        centres = (
+            np.stack([o.position_after(ep.times_s) for o in obstacles], axis=1)
+            if obstacles
+            else np.zeros((len(ep.times_s), 0, 2))
+        )
+        reachable = reference_reachable(
+            refs[:, :2], centres, np.array([o.radius_m for o in obstacles]), config.robot_radius_m
+        )
+        judgement = judge_tracking(outcome, ep.times_s, errors, reachable, sc.tau_s, outcomes)
+    converged = outcome == "reached" if is_setpoint else judgement.converged
     reversals, reverse_steps = count_reversals(ep.controls[:, 0])
     return {
         "scenario": sc.name,
@@ -203,6 +223,7 @@ def run_scenario_kinematic(
         "min_clearance_m": ep.min_clearance_m if obstacles else None,
         "final_position_error_m": float(errors[-1]),
         "tracking_rmse_m": rmse,
+        **(NO_TRACKING_FIELDS if judgement is None else judgement.fields()),
         "time_to_goal_s": ep.time_to_goal_s,
         "reversals": reversals,
         "reverse_steps": reverse_steps,

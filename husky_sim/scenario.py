@@ -14,6 +14,7 @@ them with the same schema.
 
 from __future__ import annotations
 
+import functools
 import json
 import math
 import re
@@ -23,7 +24,16 @@ from typing import Annotated, Any, Literal
 import numpy as np
 from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, ValidationError, model_validator
 
-from controllers import CircleTrajectory, NMPCConfig, Reference, SafetyConstraint, SetPoint
+from controllers import (
+    CircleTrajectory,
+    Controller,
+    NMPCConfig,
+    NMPCController,
+    Reference,
+    SafetyConstraint,
+    SetPoint,
+)
+from controllers.husky_cbf import Footprint, HuskyCBFConfig, HuskyCBFController, RobotResponse
 from husky_sim.drive import DriveConfig
 from husky_sim.episode import EpisodeConfig, Outcomes
 from husky_sim.robot import WheelFriction
@@ -31,6 +41,8 @@ from husky_sim.robot_geometry import load_geometry
 from husky_sim.scenario_file import ScenarioFileError, read_scenario_data
 from husky_sim.sensing import SensingConfig
 from husky_sim.world import ObstacleSpec, WorldConfig
+from husky_sim.yaw_response import DEFAULT_FILE as YAW_RESPONSE_FILE
+from husky_sim.yaw_response import GAIN_BOUNDS, TIME_CONSTANT_BOUNDS_S, YawResponse
 
 SCENARIO_DIR = Path(__file__).resolve().parent.parent / "scenarios"
 
@@ -218,6 +230,33 @@ class RandomObstacles(_Strict):
         return out
 
 
+class YawResponseSpec(_Strict):
+    """First-order yaw-rate lag of the robot (husky_sim.yaw_response.YawResponse): gain
+    (dimensionless) and time constant (s)."""
+
+    gain: _real(*GAIN_BOUNDS)
+    time_constant_s: _real(*TIME_CONSTANT_BOUNDS_S, "s")
+
+    def params(self) -> YawResponse:
+        return YawResponse(self.gain, self.time_constant_s)
+
+
+@functools.cache
+def identified_yaw_response() -> YawResponse:
+    """The yaw lag identified in PyBullet (`husky-sim identify`), read once from YAW_RESPONSE_FILE;
+    a missing or malformed file is a one-line ScenarioError."""
+    source = f"{YAW_RESPONSE_FILE} (the identified yaw response; `husky-sim identify` writes it)"
+    try:
+        data = read_scenario_data(YAW_RESPONSE_FILE)
+    except ScenarioFileError as exc:
+        raise ScenarioError(f"{exc} (`husky-sim identify` writes it)") from None
+    wanted = {key: data.get(key) for key in YawResponseSpec.model_fields}
+    try:
+        return YawResponseSpec.model_validate_json(json.dumps(wanted, default=str), strict=True).params()
+    except ValidationError as exc:
+        raise ScenarioError(_one_line(exc, source)) from None
+
+
 class RobotSpec(_Strict):
     """Start pose and the controller's robot circle: the URDF footprint radius plus a margin, or
     an explicit radius (a radius below the footprint is flagged in every summary)."""
@@ -226,6 +265,7 @@ class RobotSpec(_Strict):
     radius_margin_m: _real(0.0, 2.0, "m") | None = None
     radius_m: _real(0.0, 5.0, "m", lo_open=True) | None = None
     payload_kg: _real(0.0, 75.0, "kg") = 0.0  # Husky maximum payload 75 kg
+    yaw_response: YawResponseSpec | None = None  # default: the lag identified in PyBullet
 
     @model_validator(mode="after")
     def _one_radius(self) -> RobotSpec:
@@ -237,6 +277,13 @@ class RobotSpec(_Strict):
         if self.radius_m is not None:
             return self.radius_m
         return load_geometry().footprint_radius_m + self.radius_margin_m
+
+    def yaw_response_params(self) -> YawResponse:
+        """The robot's yaw-rate lag (gain, time constant s): the file's `yaw_response`, else the
+        default identified in PyBullet (assets/husky_a200/yaw_response.yaml)."""
+        if self.yaw_response is not None:
+            return self.yaw_response.params()
+        return identified_yaw_response()
 
 
 class ControllerSpec(_Strict):
@@ -294,6 +341,7 @@ class SuccessSpec(_Strict):
     goal_hold_s: _real(0.0, 3600.0, "s", lo_open=True) = 1.0
     tracking_rmse_m: _real(0.0, 10.0, "m", lo_open=True) = 0.3
     tracking_settle_s: _real(0.0, 3600.0, "s") = 10.0
+    rejoin_s: _real(0.0, 3600.0, "s") = 5.0  # why 5 s: husky_sim.episode.Outcomes
     stuck_window_steps: _whole(1, 1000, "steps") = 10
     stuck_speed_mps: _real(0.0, 1.0, "m/s", lo_open=True) = 0.05
     stuck_yaw_rate_radps: _real(0.0, 2.0, "rad/s", lo_open=True) = 0.05
@@ -409,6 +457,36 @@ class Scenario(_Strict):
             robot_radius_m=self.robot.radius(),
             obstacle_slots=max(len(self.obstacle_specs()), 1),
         )
+
+    def husky_cbf_config(self, horizon: int | None = None, gamma: float | None = None) -> HuskyCBFConfig:
+        """husky-cbf's configuration: the file's NMPC settings (Relax-CBF), the drive's limits, the
+        robot's identified yaw response and the URDF's footprint."""
+        drive = self.drive.config()
+        yaw = self.robot.yaw_response_params()
+        geometry = load_geometry()
+        slots = min(max(len(self.obstacle_specs()), 1), HuskyCBFConfig.slots)
+        return HuskyCBFConfig(
+            nmpc=self.controller_config("relax-cbf", horizon, gamma),
+            response=RobotResponse(
+                drive.max_linear_accel_mps2,
+                drive.max_angular_accel_radps2,
+                yaw.gain,
+                yaw.time_constant_s,
+                half_separation_m=0.5 * geometry.track_width_m * drive.wheel_separation_multiplier,
+                max_wheel_speed_mps=HuskyCBFConfig.wheel_speed_ratio * drive.max_linear_mps,
+            ),
+            footprint=Footprint(*geometry.footprint_half_extents_m),
+            omega_cmd_max_radps=drive.max_angular_radps,
+            slots=slots,
+        )
+
+    def make_controller(
+        self, name: str, horizon: int | None = None, gamma: float | None = None
+    ) -> Controller:
+        """The controller called `name` (controllers.CONTROLLER_NAMES) configured for this scenario."""
+        if name == "husky-cbf":
+            return HuskyCBFController(self.husky_cbf_config(horizon, gamma))
+        return NMPCController(self.controller_config(name, horizon, gamma))
 
     def episode_config(self, seed: int | None = None) -> EpisodeConfig:
         f = self.friction

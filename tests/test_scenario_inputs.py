@@ -81,6 +81,8 @@ def _base_for(path: tuple) -> dict[str, Any]:
     if path[:1] == ("robot",) and path[1] == "radius_m":
         data["robot"].pop("radius_margin_m")
         data["robot"]["radius_m"] = 0.8
+    if path[:2] == ("robot", "yaw_response"):  # optional; when given, both of its numbers are required
+        data["robot"]["yaw_response"] = {"gain": 0.5, "time_constant_s": 0.5}
     return scenario_from_data(data).model_dump(mode="json")
 
 
@@ -329,7 +331,7 @@ def test_cli_out_must_be_a_creatable_directory(tmp_path: Path) -> None:
 
 def test_cli_controller_choices_are_the_controllers_packages() -> None:
     """The CLI names them without importing CasADi before its signal handlers; they must not drift."""
-    from controllers import SAFETY_CONSTRAINTS
+    from controllers import CONTROLLER_NAMES
     from husky_sim.cli import CONTROLLER_CHOICES
 
-    assert CONTROLLER_CHOICES == SAFETY_CONSTRAINTS
+    assert CONTROLLER_CHOICES == CONTROLLER_NAMES

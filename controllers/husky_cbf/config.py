@@ -1,0 +1,199 @@
+"""Configuration of husky-cbf: the paper's NMPC-CLF settings plus what the Husky's physics needs.
+
+The paper's part (tau, N, weights, alpha, gamma, velocity bounds) is an `NMPCConfig` with
+Relax-CBF as its obstacle constraint, so its defaults live in one place (controllers.config).
+Everything else is here, with the reason for each default. The robot's own figures (acceleration
+limits, yaw-rate response, body size) have no defaults: they come from the robot description and
+the identified response in the scenario file, never from literals in code.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+from controllers.config import ConfigError, NMPCConfig
+
+
+def _positive(name: str, value: float) -> None:
+    if not (value > 0 and math.isfinite(value)):
+        raise ConfigError(f"{name}: must be > 0 and finite, got {value}")
+
+
+def _non_negative(name: str, value: float) -> None:
+    if not (value >= 0 and math.isfinite(value)):
+        raise ConfigError(f"{name}: must be >= 0 and finite, got {value}")
+
+
+@dataclass(frozen=True)
+class RobotResponse:
+    """How the drive follows a command: acceleration limits (m/s^2, rad/s^2) of the commanded
+    velocities, the body yaw rate's first-order lag behind the commanded yaw rate,
+    d(omega_body)/dt = (yaw_gain * omega_cmd - omega_body) / yaw_time_constant_s, and the wheel
+    speed limit: each side's wheels run at v -+ half_separation_m * omega_cmd (m/s, with the
+    drive's effective separation), at most max_wheel_speed_mps. Beyond it a skid-steer no longer
+    does what a unicycle would (commanded 1 m/s and 2 rad/s, a Husky skidded on at 1.3 m/s)."""
+
+    max_linear_accel_mps2: float
+    max_angular_accel_radps2: float
+    yaw_gain: float
+    yaw_time_constant_s: float
+    half_separation_m: float
+    max_wheel_speed_mps: float
+
+    def __post_init__(self) -> None:
+        for name in (
+            "max_linear_accel_mps2",
+            "max_angular_accel_radps2",
+            "yaw_gain",
+            "yaw_time_constant_s",
+            "half_separation_m",
+            "max_wheel_speed_mps",
+        ):
+            _positive(f"response.{name}", getattr(self, name))
+
+
+@dataclass(frozen=True)
+class Footprint:
+    """The body's ground projection as a rectangle about the base origin (m): half length along
+    x (forward), half width along y, wheels included."""
+
+    half_length_m: float
+    half_width_m: float
+
+    def __post_init__(self) -> None:
+        _positive("footprint.half_length_m", self.half_length_m)
+        _positive("footprint.half_width_m", self.half_width_m)
+
+
+@dataclass(frozen=True)
+class GuidanceConfig:
+    """Waypoint guidance around blocked straight paths (controllers.husky_cbf.guidance)."""
+
+    grid_resolution_m: float = 0.1  # cost-grid cell size
+    grid_padding_m: float = 3.0  # grid extends this far beyond the robot and the goal
+    clearance_cost_m: float = 0.6  # cells closer than this to an inflated obstacle cost more ...
+    clearance_cost_gain: float = 4.0  # ... up to (1 + gain) times their length
+    lookahead_m: float = 1.5  # the waypoint: the farthest path point within this, in sight
+    mover_sweep_s: float = 2.0  # a mover blocks where it will be over the next seconds
+    release_margin_m: float = 0.1  # a guided robot leaves guidance only with this much to spare
+    #: Mover evasion (guidance.MoverEvasion): a mover whose track relative to the robot comes
+    #: within its radius + the robot's inflation + evade_margin_m in the next evade_horizon_s
+    #: makes the robot step aside now
+    evade_horizon_s: float = 6.0
+    evade_margin_m: float = 0.5
+    tracking_preview_s: float = 1.0  # tracking: the reference this far ahead is the path's goal
+    #: Set-point approach (guidance.LineApproach): within approach_radius_m of the goal, a robot
+    #: off the goal's line (|lateral| > approach_exit_m) is led onto it
+    #: by a waypoint on the line approach_lookahead_m ahead of it, or, beside or past the goal by
+    #: more than approach_enter_m, behind it (it backs up onto the line, 1.5 lookaheads or 4 m
+    #: per m of lateral error behind the goal, and leaves only aligned
+    #: within approach_exit_rad): a unicycle beside its goal cannot close the gap within a short
+    #: horizon, and the skid-steer barely answers small turns.
+    approach_radius_m: float = 3.0
+    approach_lookahead_m: float = 1.0
+    approach_enter_m: float = 0.07
+    approach_exit_m: float = 0.03
+    approach_exit_rad: float = 0.05
+    approach_speed_mps: float = 0.6  # |v| cap within slow_radius_m of a set-point: time for the yaw lag
+    slow_radius_m: float = 1.5
+    #: a trajectory slower than this (m/s) is approached like a set-point (the paper's dynamic
+    #: tracking circle moves at 0.02 m/s)
+    approach_max_reference_speed_mps: float = 0.1
+
+    def __post_init__(self) -> None:
+        for name in (
+            "grid_resolution_m",
+            "grid_padding_m",
+            "clearance_cost_m",
+            "lookahead_m",
+            "approach_radius_m",
+            "approach_lookahead_m",
+            "approach_enter_m",
+            "approach_exit_m",
+            "approach_exit_rad",
+            "approach_speed_mps",
+            "slow_radius_m",
+            "approach_max_reference_speed_mps",
+        ):
+            _positive(f"guidance.{name}", getattr(self, name))
+        for name in (
+            "clearance_cost_gain",
+            "mover_sweep_s",
+            "release_margin_m",
+            "tracking_preview_s",
+            "evade_horizon_s",
+            "evade_margin_m",
+        ):
+            _non_negative(f"guidance.{name}", getattr(self, name))
+
+
+@dataclass(frozen=True)
+class HuskyCBFConfig:
+    """husky-cbf: Relax-CBF NMPC-CLF on a dynamically extended model with a multi-disc body."""
+
+    nmpc: NMPCConfig  # the paper's part; its safety must be relax-cbf
+    response: RobotResponse
+    footprint: Footprint
+    omega_cmd_max_radps: float = 2.0  # commanded yaw-rate bound (the Husky's drive limit, rad/s)
+    #: each side's wheel speed at most this times the drive's linear limit (response's
+    #: max_wheel_speed_mps is set from it): commanded 1 m/s and 2 rad/s (wheels at 2 m/s), the
+    #: PyBullet Husky skidded on at 1.3 m/s; with the limit at 1x, it could no longer turn near
+    #: its goal while moving
+    wheel_speed_ratio: float = 1.5
+    #: margin (m) between each body disc and an obstacle: sensing noise and the drive's
+    #: tracking error; braking distance is in the model, so this need not cover it.
+    margin_m: float = 0.1
+    #: a mover's circle grows by this much per metre of its predicted travel (m/m): its velocity
+    #: is an estimate, and a person does not walk a straight line.
+    mover_margin_per_m: float = 0.3
+    #: a mover at a predicted step blocks its whole track over the next this many seconds (s):
+    #: the time a skid-steer needs to turn away (yaw lag) and brake
+    mover_sweep_s: float = 1.5
+    #: disc count: the fewest discs along the body whose radius exceeds the half width by at most
+    #: this (m); 3 for a Husky (radius 0.38 m, against 0.57 m for one enclosing circle).
+    disc_excess_m: float = 0.05
+    accel_weight: tuple[float, float] = (0.2, 0.05)  # cost on (dv/dt, d omega_cmd/dt) squared
+    #: terminal cost in the reference's frame (along, across, heading): a heavy lateral weight,
+    #: so that a short horizon does not settle beside its goal (a unicycle beside its goal lowers
+    #: a stage cost only by backing up and turning).
+    terminal_weight: tuple[float, float, float] = (20.0, 200.0, 5.0)
+    #: the terminal lateral error is taken this far ahead of the robot (behind it while it backs
+    #: up onto a goal's line), so that turning toward the line pays within a short horizon (m)
+    terminal_lookahead_m: float = 0.5
+    terminal_speed_weight: float = 5.0  # set-points: arrive at rest ((m/s)^-2 in the cost)
+    soft_penalty: float = 1e4  # exact-penalty weight on the obstacle slack of the re-solve
+    slots: int = 6  # nearest obstacles in the NLP
+    guidance: GuidanceConfig = field(default_factory=GuidanceConfig)
+
+    @property
+    def tau_s(self) -> float:
+        """Sampling time (s), the paper part's."""
+        return self.nmpc.tau_s
+
+    @property
+    def horizon(self) -> int:
+        """Prediction steps N, the paper part's."""
+        return self.nmpc.horizon
+
+    def __post_init__(self) -> None:
+        if self.nmpc.safety != "relax-cbf":
+            raise ConfigError(f"nmpc.safety: husky-cbf is built on relax-cbf, got {self.nmpc.safety!r}")
+        _positive("omega_cmd_max_radps", self.omega_cmd_max_radps)
+        _positive("wheel_speed_ratio", self.wheel_speed_ratio)
+        for name in (
+            "margin_m",
+            "mover_margin_per_m",
+            "mover_sweep_s",
+            "disc_excess_m",
+            "terminal_speed_weight",
+            "terminal_lookahead_m",
+        ):
+            _non_negative(name, getattr(self, name))
+        _positive("soft_penalty", self.soft_penalty)
+        if len(self.accel_weight) != 2 or min(self.accel_weight) < 0:
+            raise ConfigError(f"accel_weight: two weights >= 0, got {self.accel_weight}")
+        if len(self.terminal_weight) != 3 or min(self.terminal_weight) < 0:
+            raise ConfigError(f"terminal_weight: three weights >= 0, got {self.terminal_weight}")
+        if not 1 <= self.slots <= 64:
+            raise ConfigError(f"slots: must be in [1, 64], got {self.slots}")

@@ -1,0 +1,329 @@
+"""husky-cbf: the paper's Relax-CBF NMPC-CLF extended with what a Husky's physics needs.
+
+Per control step:
+1. the initial state of the extended model: the measured pose, the commands the drive is applying
+   (the last command, which every plan keeps within the drive's acceleration limits) and the body
+   yaw rate (the model's prediction corrected by the measured heading change);
+2. the reference: the paper's, unless the straight way to it is blocked; then a guidance waypoint
+   (guidance.py);
+3. the nearest obstacles predicted at constant velocity, each inflated by the margin, and movers
+   by a margin growing with their predicted travel;
+4. the hard OCP (ocp.py); if IPOPT fails, the same OCP with an exactly penalised obstacle slack
+   (a feasible hard plan is its optimum, so this also recovers solves that failed from a poor
+   start); if that fails too, again from each of controllers.recovery's guesses; else brake.
+Every step reports whether it was guided, penalised (obstacle slack > 0) or recovered.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Sequence
+
+import numpy as np
+
+from controllers.backends import RawSolution
+from controllers.husky_cbf.config import HuskyCBFConfig
+from controllers.husky_cbf.footprint import disc_cover
+from controllers.husky_cbf.guidance import Guidance, LineApproach, MoverEvasion, inflated_circles
+from controllers.husky_cbf.model import extended_step
+from controllers.husky_cbf.ocp import ExtendedPlan, Layout, make_solver, pack_parameters
+from controllers.interface import ControlResult
+from controllers.model import wrap_angle
+from controllers.obstacles import Obstacle, predict_obstacles
+from controllers.recovery import recovery_commands
+from controllers.references import Reference, SetPoint
+from controllers.signals import deliver_after_solve
+
+#: An obstacle constraint residual (m^2) at most this counts as active.
+ACTIVE_TOL = 1e-4
+#: An obstacle slack (m^2) above this means the plan needed the penalised slack.
+SLACK_TOL = 1e-6
+#: Weight of the measured heading change in the body yaw-rate estimate (0: model only).
+YAW_RATE_CORRECTION = 0.5
+#: Tracking: how far (s) past the preview the reference is searched for a point in free space.
+TRACKING_SEARCH_S = 5.0
+
+
+class HuskyCBFController:
+    """The `husky-cbf` controller; implements controllers.interface.Controller."""
+
+    def __init__(self, config: HuskyCBFConfig) -> None:
+        self.config = config
+        base = config.nmpc
+        self._hard_problem, self._hard = make_solver(config, base.horizon, config.slots, soft=False)
+        self._soft_problem, self._soft = make_solver(config, base.horizon, config.slots, soft=True)
+        self._discs, self._disc_radius = disc_cover(config.footprint, config.disc_excess_m)
+        self._guidance = Guidance(config.guidance, self._disc_radius + config.margin_m)
+        self._approach = LineApproach(config.guidance)
+        self._evasion = MoverEvasion(config.guidance, self._disc_radius + config.margin_m)
+        self._step = extended_step(base.tau_s, config.response)
+        self.reset()
+
+    @property
+    def tau_s(self) -> float:
+        return self.config.nmpc.tau_s
+
+    @property
+    def disc_radius_m(self) -> float:
+        return self._disc_radius
+
+    def reset(self) -> None:
+        self._plan: ExtendedPlan | None = None
+        self._applied = np.zeros(2)  # commands the drive is applying (v m/s, omega rad/s)
+        self._omega_body = 0.0  # predicted body yaw rate now (rad/s)
+        self._omega_prev = 0.0  # estimated body yaw rate at the previous step (rad/s)
+        self._yaw_prev: float | None = None
+        self._guidance.reset()
+        self._approach.reset()
+        self._evasion.reset()
+        self._hard.reset()
+        self._soft.reset()
+
+    # -- per-step preparation -------------------------------------------------------------
+    def _initial_state(self, pose: np.ndarray) -> np.ndarray:
+        omega = self._omega_body
+        if self._yaw_prev is not None:
+            measured = float(wrap_angle(pose[2] - self._yaw_prev)) / self.tau_s
+            predicted = 0.5 * (self._omega_prev + self._omega_body)
+            omega += YAW_RATE_CORRECTION * (measured - predicted)
+        return np.array([*pose, *self._applied, omega])
+
+    def _reference(
+        self,
+        pose: np.ndarray,
+        speed_mps: float,
+        reference: Reference,
+        obstacles: Sequence[Obstacle],
+        t: float,
+    ) -> tuple[np.ndarray, np.ndarray, bool]:
+        cfg, base = self.config, self.config.nmpc
+        ref_states, ref_controls = reference.sample(t, base.tau_s, base.horizon)
+        w = cfg.omega_cmd_max_radps
+        ref_controls[:, 1] = np.clip(ref_controls[:, 1] / cfg.response.yaw_gain, -w, w)
+        goal = (
+            ref_states[-1]
+            if isinstance(reference, SetPoint)
+            else self._tracking_goal(pose, reference, obstacles, t)
+        )
+        # where to go now, in priority: out of a mover's way, onto a set-point's line, the goal
+        target = self._evasion.waypoint(pose, speed_mps, obstacles)
+        if target is None and self._nearly_stationary(reference, t):
+            circles = inflated_circles(obstacles, self._guidance.inflation_m, 0.0, pose[:2])
+            target = self._approach.waypoint(pose, goal, circles)
+        if target is not None:
+            goal = np.array([target.x_m, target.y_m, target.heading_rad])
+        waypoint = self._guidance.waypoint(pose[:2], goal, obstacles) or target
+        if waypoint is None:
+            return ref_states, ref_controls, False
+        target = [waypoint.x_m, waypoint.y_m, waypoint.heading_rad]
+        return np.tile(target, (base.horizon + 1, 1)), np.zeros((base.horizon, 2)), True
+
+    def _tracking_goal(
+        self, pose: np.ndarray, reference: Reference, obstacles: Sequence[Obstacle], t: float
+    ) -> np.ndarray:
+        """The reference a preview ahead, or the first later one outside every inflated obstacle."""
+        g = self.config.guidance
+        circles = inflated_circles(obstacles, self._guidance.inflation_m, 0.0, pose[:2])
+        times = t + g.tracking_preview_s + np.arange(0.0, TRACKING_SEARCH_S, self.tau_s)
+        states = reference.sample(float(times[0]), self.tau_s, len(times) - 1)[0]
+        for state in states:
+            if circles.size == 0 or np.all(np.hypot(*(circles[:, :2] - state[:2]).T) > circles[:, 2]):
+                return state
+        return states[0]
+
+    def _obstacles(self, pose: np.ndarray, obstacles: Sequence[Obstacle]) -> tuple[np.ndarray, np.ndarray]:
+        cfg, base = self.config, self.config.nmpc
+        centres, radii = predict_obstacles(
+            obstacles, pose[:2], cfg.slots, base.tau_s, base.horizon, base.obstacle_prediction
+        )
+        # a mover at step k is a circle covering its track over [k tau, k tau + mover_sweep_s]:
+        # a skid-steer needs time to turn away, so the plan keeps clear of where the mover is
+        # about to be, not only of where it is; its margin also grows with predicted travel
+        velocity = (centres[:, 1, :] - centres[:, 0, :]) / base.tau_s
+        speed = np.hypot(velocity[:, 0], velocity[:, 1])
+        half_sweep = 0.5 * cfg.mover_sweep_s
+        centres = centres + half_sweep * velocity[:, None, :]
+        travel = speed[:, None] * base.tau_s * np.arange(base.horizon + 1)
+        inflated = (
+            radii[:, None] + cfg.margin_m + half_sweep * speed[:, None] + cfg.mover_margin_per_m * travel
+        )
+        return centres, inflated
+
+    def _nearly_stationary(self, reference: Reference, t: float) -> bool:
+        """A set-point, or a trajectory slower than approach_max_reference_speed_mps now: a robot
+        must then be brought onto it like onto a set-point (it will not come to the robot)."""
+        if isinstance(reference, SetPoint):
+            return True
+        speed = float(reference.sample(t, self.tau_s, 1)[1][0, 0])
+        return speed < self.config.guidance.approach_max_reference_speed_mps
+
+    def _speed_caps(self, z0: np.ndarray, reference: Reference, t: float) -> np.ndarray:
+        """|v| cap per predicted step (m/s): approach_speed_mps within slow_radius_m of a
+        (nearly) stationary reference (reached from the current speed at the drive's
+        deceleration), else v_max."""
+        cfg, base = self.config, self.config.nmpc
+        v_max = max(base.v_max_mps, -base.v_min_mps)
+        steps = np.arange(1, base.horizon + 1)
+        if not self._nearly_stationary(reference, t):
+            return np.full(base.horizon, v_max)
+        goal = reference.state_at(t)
+        if math.hypot(z0[0] - goal[0], z0[1] - goal[1]) > cfg.guidance.slow_radius_m:
+            return np.full(base.horizon, v_max)
+        braking = abs(z0[3]) - cfg.response.max_linear_accel_mps2 * base.tau_s * steps
+        return np.minimum(np.maximum(cfg.guidance.approach_speed_mps, braking), v_max)
+
+    def _warm_guess(self, z0: np.ndarray) -> ExtendedPlan:
+        n = self.config.nmpc.horizon
+        if self._plan is None:
+            return self._rollout(z0, np.zeros((n, 2)))
+        plan = self._plan
+        states = np.vstack([plan.states[1:], plan.states[-1:]])
+        states[:, 2] += 2 * math.pi * round((z0[2] - states[0, 2]) / (2 * math.pi))
+        states[0] = z0
+        accels = np.vstack([plan.accels[1:], np.zeros((1, 2))])
+        return ExtendedPlan(states, accels, np.zeros(n), np.ones(n), np.zeros_like(plan.sigma))
+
+    def _rollout(self, z0: np.ndarray, accels: np.ndarray) -> ExtendedPlan:
+        n = accels.shape[0]
+        states = [z0]
+        for a in accels:
+            states.append(np.asarray(self._step(states[-1], a), dtype=float).reshape(-1))
+        return ExtendedPlan(
+            np.array(states), accels, np.zeros(n), np.ones(n), np.zeros((self.config.slots, n))
+        )
+
+    def _accels_for(self, z0: np.ndarray, commands: np.ndarray) -> np.ndarray:
+        """Accelerations that move the commanded velocities toward `commands` within the limits."""
+        r = self.config.response
+        limit = np.array([r.max_linear_accel_mps2, r.max_angular_accel_radps2])
+        out, current = [], z0[3:5].copy()
+        for command in commands:
+            a = np.clip((command - current) / self.tau_s, -limit, limit)
+            current = current + a * self.tau_s
+            out.append(a)
+        return np.array(out)
+
+    # -- solving --------------------------------------------------------------------------
+    def _solve(self, solver: object, layout: Layout, p: np.ndarray, guess: ExtendedPlan) -> RawSolution:
+        with deliver_after_solve():  # an interrupt is delivered, never taken for a failed solve
+            try:
+                return solver.solve(p, guess.to_vector(layout))
+            except Exception as exc:  # noqa: BLE001 - a control loop must survive any solver error
+                return RawSolution(guess.to_vector(layout), False, f"exception: {exc}", -1)
+
+    def solve(
+        self, state: np.ndarray, reference: Reference, obstacles: Sequence[Obstacle], t: float
+    ) -> ControlResult:
+        start = time.perf_counter()
+        cfg, base = self.config, self.config.nmpc
+        pose = np.asarray(state, dtype=float).reshape(-1)
+        n_real = min(len(obstacles), cfg.slots)
+        if pose.shape != (3,) or not np.all(np.isfinite(pose)):
+            self._plan = None
+            return self._brake(
+                np.full(3, np.nan), n_real, len(obstacles) - n_real, start, "invalid state", False
+            )
+        z0 = self._initial_state(pose)
+        ref_states, ref_controls, guided = self._reference(pose, float(z0[3]), reference, obstacles, t)
+        centres, radii = self._obstacles(pose, obstacles)
+        lookahead = cfg.terminal_lookahead_m * (-1.0 if self._approach.docking else 1.0)
+        caps = self._speed_caps(z0, reference, t)
+        p = pack_parameters(z0, ref_states, ref_controls, centres, radii, caps, lookahead)
+        guess = self._warm_guess(z0)
+        hard, soft = self._hard_problem.layout, self._soft_problem.layout
+
+        raw, layout, recovered_by = self._solve(self._hard, hard, p, guess), hard, ""
+        if not raw.success:
+            first_status = raw.status
+            attempts = [("penalty", guess)]
+            previous = self._plan.commands[1:] if self._plan is not None else None
+            if previous is not None:
+                previous = np.vstack([previous, previous[-1:]])
+            for name, commands in recovery_commands(
+                pose,
+                ref_states[-1],
+                previous,
+                base.horizon,
+                base.tau_s,
+                (base.v_min_mps, base.v_max_mps),
+                cfg.omega_cmd_max_radps,
+            ):
+                attempts.append((name, self._rollout(z0, self._accels_for(z0, commands))))
+            for name, attempt in attempts:
+                if name != "penalty":
+                    self._soft.reset()
+                raw = self._solve(self._soft, soft, p, attempt)
+                if raw.success:
+                    layout, recovered_by = soft, name
+                    break
+            if not raw.success:
+                self._plan = None
+                self._hard.reset()
+                return self._brake(pose, n_real, len(obstacles) - n_real, start, first_status, guided)
+        plan = ExtendedPlan.from_vector(raw.decision, layout)
+        self._plan = plan
+        command = plan.states[1, 3:5].copy()
+        self._advance(pose, plan.states[0, 5], plan.states[1, 5], command)
+        barriers = self._barriers(plan, p, layout, n_real)
+        residual = barriers[:, 1:] - plan.decay_slack * (1.0 - base.gamma) * barriers[:, :-1]
+        return ControlResult(
+            control=command,
+            predicted_states=plan.states[:, :3].copy(),
+            predicted_controls=plan.commands.copy(),
+            clf_slack=plan.clf_slack,
+            decay_slack=plan.decay_slack,
+            predicted_barrier=barriers,
+            safety_active=int(np.sum(residual <= ACTIVE_TOL)),
+            status=raw.status,
+            success=True,
+            fallback="none",
+            iterations=raw.iterations,
+            solve_time_s=time.perf_counter() - start,
+            obstacles_considered=n_real,
+            obstacles_ignored=len(obstacles) - n_real,
+            recovered_by=recovered_by,
+            soft_constraint=bool(np.max(plan.sigma, initial=0.0) > SLACK_TOL),
+            guided=guided,
+        )
+
+    def _barriers(self, plan: ExtendedPlan, p: np.ndarray, layout: Layout, n_real: int) -> np.ndarray:
+        """(obstacles considered, N+1) smallest B over the body discs."""
+        problem = self._soft_problem if layout.soft else self._hard_problem
+        rows = np.asarray(problem.barriers(plan.to_vector(layout), p), dtype=float)
+        per_slot = rows.reshape(self.config.slots, len(self._discs), -1).min(axis=1)
+        return per_slot[:n_real]
+
+    def _advance(self, pose: np.ndarray, omega_now: float, omega_next: float, command: np.ndarray) -> None:
+        """Remember what the drive applies and the predicted body yaw rate at the next step."""
+        self._applied = command
+        self._omega_prev, self._omega_body = omega_now, omega_next
+        self._yaw_prev = float(pose[2])
+
+    def _brake(
+        self, pose: np.ndarray, n_real: int, ignored: int, start: float, status: str, guided: bool
+    ) -> ControlResult:
+        n = self.config.nmpc.horizon
+        if np.all(np.isfinite(pose)):
+            z0 = self._initial_state(pose)
+            braking = self._rollout(z0, self._accels_for(z0, np.zeros((n, 2))))
+            self._advance(pose, z0[5], braking.states[1, 5], braking.states[1, 3:5].copy())
+        else:
+            self._yaw_prev = None
+        return ControlResult(
+            control=np.zeros(2),
+            predicted_states=np.full((n + 1, 3), np.nan),
+            predicted_controls=np.zeros((n, 2)),
+            clf_slack=np.zeros(n),
+            decay_slack=np.ones(n),
+            predicted_barrier=np.full((n_real, n + 1), np.nan),
+            safety_active=0,
+            status=status,
+            success=False,
+            fallback="brake",
+            iterations=-1,
+            solve_time_s=time.perf_counter() - start,
+            obstacles_considered=n_real,
+            obstacles_ignored=ignored,
+            guided=guided,
+        )

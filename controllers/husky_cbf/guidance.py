@@ -1,0 +1,289 @@
+"""Waypoint guidance for husky-cbf when the straight way to the goal is blocked.
+
+A short-horizon NMPC whose straight path is blocked (an obstacle on the line, a gap, a wall of
+obstacles, a mover coming head-on) stops at the obstacle: its cost only falls by going straight.
+Guidance detects that case and hands the NMPC a nearer waypoint instead of the goal:
+
+- obstacles are inflated by the robot's disc radius plus margin; a mover is swept over its next
+  `mover_sweep_s` seconds (constant velocity), so a path is not planned through where it will be;
+- blocked: the segment from the robot to the goal crosses an inflated obstacle (a guided robot
+  needs `release_margin_m` more to leave guidance, so it does not flicker in and out);
+- then a shortest path on a cost grid (cells near obstacles cost more, so the path keeps its
+  distance) by scipy.sparse.csgraph.dijkstra, and the waypoint is the farthest path point within
+  `lookahead_m` that the robot can see. When nothing blocks, there is no waypoint and the NMPC
+  follows the paper's reference unchanged.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import ndimage
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import dijkstra
+
+from controllers.husky_cbf.config import GuidanceConfig
+from controllers.obstacles import Obstacle
+
+MAX_GRID_CELLS = 200_000  # a larger area is searched on a coarser grid
+
+
+@dataclass(frozen=True)
+class Waypoint:
+    """Where to go now (m, m, rad) and the path it was taken from ((K, 2), m)."""
+
+    x_m: float
+    y_m: float
+    heading_rad: float
+    path: np.ndarray
+
+
+def inflated_circles(
+    obstacles: Sequence[Obstacle], inflation_m: float, sweep_s: float, robot_xy: np.ndarray
+) -> np.ndarray:
+    """(M, 3) circles [x, y, r] (m): obstacles inflated by `inflation_m`, movers swept over
+    sweep_s; a circle that holds the robot is shrunk to just exclude it (the robot is where it is)."""
+    circles = []
+    for ob in obstacles:
+        radius = ob.radius_m + inflation_m
+        speed = math.hypot(ob.vx_mps, ob.vy_mps)
+        samples = max(int(math.ceil(speed * sweep_s / (0.5 * radius))) + 1, 1) if speed > 1e-3 else 1
+        for t in np.linspace(0.0, sweep_s if samples > 1 else 0.0, samples):
+            circles.append((ob.x_m + ob.vx_mps * t, ob.y_m + ob.vy_mps * t, radius))
+    if not circles:
+        return np.zeros((0, 3))
+    out = np.array(circles)
+    dist = np.hypot(out[:, 0] - robot_xy[0], out[:, 1] - robot_xy[1])
+    out[:, 2] = np.where(dist < out[:, 2], np.maximum(dist - 1e-3, 0.0), out[:, 2])
+    return out
+
+
+def segment_blocked(a: np.ndarray, b: np.ndarray, circles: np.ndarray, extra_m: float = 0.0) -> bool:
+    """Whether the segment a-b (m) passes within r + extra_m of any circle's centre."""
+    if circles.size == 0:
+        return False
+    d = np.asarray(b, dtype=float) - np.asarray(a, dtype=float)
+    length_sq = float(d @ d)
+    rel = circles[:, :2] - a
+    s = np.clip(rel @ d / length_sq, 0.0, 1.0) if length_sq > 0 else np.zeros(len(circles))
+    closest = a + s[:, None] * d
+    return bool(np.any(np.hypot(*(circles[:, :2] - closest).T) < circles[:, 2] + extra_m))
+
+
+class Guidance:
+    """Remembers whether the last step was guided (for the release margin)."""
+
+    def __init__(self, config: GuidanceConfig, inflation_m: float) -> None:
+        self.config = config
+        self.inflation_m = inflation_m
+        self.guided = False
+
+    def reset(self) -> None:
+        self.guided = False
+
+    def waypoint(
+        self, robot_xy: np.ndarray, goal: np.ndarray, obstacles: Sequence[Obstacle]
+    ) -> Waypoint | None:
+        """A waypoint toward goal [x, y, heading] (m, m, rad) if the straight way is blocked."""
+        cfg = self.config
+        robot_xy = np.asarray(robot_xy, dtype=float)
+        circles = inflated_circles(obstacles, self.inflation_m, cfg.mover_sweep_s, robot_xy)
+        extra = cfg.release_margin_m if self.guided else 0.0
+        if not segment_blocked(robot_xy, goal[:2], circles, extra):
+            self.guided = False
+            return None
+        path = self._shortest_path(robot_xy, np.asarray(goal[:2], dtype=float), circles)
+        if path is None or len(path) < 2:  # no way round (yet): wait behind the obstacle
+            self.guided = False
+            return None
+        self.guided = True
+        return self._carrot(robot_xy, path, circles, goal)
+
+    def _shortest_path(self, start: np.ndarray, goal: np.ndarray, circles: np.ndarray) -> np.ndarray | None:
+        cfg = self.config
+        lo = np.minimum(start, goal) - cfg.grid_padding_m
+        hi = np.maximum(start, goal) + cfg.grid_padding_m
+        res = max(cfg.grid_resolution_m, math.sqrt(float(np.prod(hi - lo)) / MAX_GRID_CELLS))
+        nx, ny = (np.ceil((hi - lo) / res).astype(int) + 1).tolist()
+        xs, ys = lo[0] + res * np.arange(nx), lo[1] + res * np.arange(ny)
+        occupied = np.zeros((ny, nx), dtype=bool)
+        for cx, cy, r in circles:
+            i0, i1 = np.searchsorted(ys, [cy - r, cy + r])
+            j0, j1 = np.searchsorted(xs, [cx - r, cx + r])
+            gx, gy = np.meshgrid(xs[j0:j1], ys[i0:i1])
+            occupied[i0:i1, j0:j1] |= (gx - cx) ** 2 + (gy - cy) ** 2 < r * r
+        cell = lambda p: (int(round((p[1] - lo[1]) / res)), int(round((p[0] - lo[0]) / res)))  # noqa: E731
+        si, sj = cell(start)
+        occupied[si, sj] = False
+        clearance = ndimage.distance_transform_edt(~occupied) * res
+        cost = 1.0 + cfg.clearance_cost_gain * np.clip(1.0 - clearance / cfg.clearance_cost_m, 0.0, 1.0)
+        index = np.arange(nx * ny).reshape(ny, nx)
+        rows, cols, weights = [], [], []
+        for di, dj in ((0, 1), (1, 0), (1, 1), (1, -1)):
+            a = index[max(0, -di) : ny - max(0, di), max(0, -dj) : nx - max(0, dj)]
+            b = index[max(0, di) : ny + min(0, di) or None, max(0, dj) : nx + min(0, dj) or None]
+            a, b = a.ravel(), b.ravel()
+            free = ~occupied.ravel()[a] & ~occupied.ravel()[b]
+            a, b = a[free], b[free]
+            rows.append(a)
+            cols.append(b)
+            weights.append(res * math.hypot(di, dj) * 0.5 * (cost.ravel()[a] + cost.ravel()[b]))
+        graph = coo_matrix(
+            (np.concatenate(weights), (np.concatenate(rows), np.concatenate(cols))), shape=(nx * ny, nx * ny)
+        ).tocsr()
+        source = int(index[si, sj])
+        distance, predecessors = dijkstra(graph, directed=False, indices=source, return_predecessors=True)
+        gi, gj = cell(goal)
+        gi, gj = min(max(gi, 0), ny - 1), min(max(gj, 0), nx - 1)
+        target = int(index[gi, gj])
+        if not np.isfinite(distance[target]):
+            reachable = np.flatnonzero(np.isfinite(distance))
+            if reachable.size <= 1:
+                return None
+            px, py = xs[reachable % nx], ys[reachable // nx]
+            target = int(reachable[np.argmin(np.hypot(px - goal[0], py - goal[1]))])
+        nodes = [target]
+        while nodes[-1] != source:
+            nodes.append(int(predecessors[nodes[-1]]))
+        nodes.reverse()
+        nodes_arr = np.array(nodes)
+        path = np.column_stack([xs[nodes_arr % nx], ys[nodes_arr // nx]])
+        path[0] = start
+        return path
+
+    def _carrot(
+        self, robot_xy: np.ndarray, path: np.ndarray, circles: np.ndarray, goal: np.ndarray
+    ) -> Waypoint:
+        cfg = self.config
+        along = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(path, axis=0).T))])
+        chosen = 1
+        for i in range(1, len(path)):
+            if along[i] > cfg.lookahead_m:
+                break
+            if not segment_blocked(robot_xy, path[i], circles):
+                chosen = i
+        ahead = path[min(chosen + 3, len(path) - 1)]
+        if chosen == len(path) - 1 or np.allclose(ahead, path[chosen]):
+            heading = (
+                float(goal[2])
+                if np.hypot(*(path[-1] - goal[:2])) < 1e-6
+                else float(math.atan2(path[chosen][1] - robot_xy[1], path[chosen][0] - robot_xy[0]))
+            )
+        else:
+            heading = math.atan2(ahead[1] - path[chosen][1], ahead[0] - path[chosen][0])
+        return Waypoint(float(path[chosen][0]), float(path[chosen][1]), float(heading), path)
+
+
+class LineApproach:
+    """Brings a robot onto its set-point along the goal's line (GuidanceConfig.approach_*).
+
+    First a pre-goal waypoint approach_lookahead_m * 1.5 before the goal on its line (unless an
+    obstacle covers it), so that the robot arrives straight; within approach_radius_m of the goal
+    a robot off the line is led onto it by a waypoint on the line ahead of it, or, beside or past
+    the goal, behind it (docking: it backs up onto the line, then drives in along it). A unicycle
+    beside its goal cannot close the gap within a short horizon, and the skid-steer barely answers
+    the small turns that would."""
+
+    def __init__(self, config: GuidanceConfig) -> None:
+        self.config = config
+        self.reset()
+
+    def reset(self) -> None:
+        self.docking = False
+        self.pre_goal_done = False
+        self.back_to = 0.0  # how far behind the goal (m) the current docking backs up
+
+    def waypoint(self, pose: np.ndarray, goal: np.ndarray, circles: np.ndarray) -> Waypoint | None:
+        """The approach waypoint, or None to go for the goal itself; `circles` are the inflated
+        obstacles (inflated_circles)."""
+        cfg = self.config
+        h = np.array([math.cos(goal[2]), math.sin(goal[2])])
+        d = np.asarray(pose[:2], dtype=float) - goal[:2]
+        along, lateral = float(d @ h), float(h[0] * d[1] - h[1] * d[0])
+        back = 1.5 * cfg.approach_lookahead_m
+        if not self.pre_goal_done:
+            pre_goal = goal[:2] - back * h
+            blocked = circles.size and np.any(np.hypot(*(circles[:, :2] - pre_goal).T) < circles[:, 2])
+            if math.hypot(*(pose[:2] - pre_goal)) < cfg.approach_exit_m * 10 or along > -back:
+                self.pre_goal_done = True
+            elif not blocked:  # (an obstacle over it, perhaps only passing: the goal for now)
+                return Waypoint(
+                    float(pre_goal[0]), float(pre_goal[1]), float(goal[2]), np.array([pose[:2], pre_goal])
+                )
+        aligned = abs(math.remainder(float(pose[2]) - float(goal[2]), 2 * math.pi)) <= cfg.approach_exit_rad
+        on_line = abs(lateral) <= cfg.approach_exit_m and (aligned or not self.docking)
+        backed_up = along <= -0.93 * self.back_to  # far enough back: drive in now
+        if on_line or backed_up or math.hypot(*d) > cfg.approach_radius_m:
+            self.docking = False
+        if on_line or math.hypot(*d) > cfg.approach_radius_m:
+            return None
+        if (
+            not self.docking
+            and along > -0.5 * cfg.approach_lookahead_m
+            and abs(lateral) > cfg.approach_enter_m
+        ):
+            # back up far enough to turn onto the line and reach it: 4 m per m of lateral error
+            self.docking, self.back_to = True, min(max(back, 4.0 * abs(lateral)), cfg.approach_radius_m - 0.3)
+        if self.docking:
+            target = max(along - cfg.approach_lookahead_m, -self.back_to)
+        else:
+            target = min(along + cfg.approach_lookahead_m, 0.0)
+        point = goal[:2] + target * h
+        return Waypoint(float(point[0]), float(point[1]), float(goal[2]), np.array([pose[:2], point]))
+
+
+class MoverEvasion:
+    """Steps aside early from a mover on a collision course (GuidanceConfig.evade_*).
+
+    A skid-steer needs a second or two to turn, so a short horizon that first sees a mover when
+    its constraint activates can only back away in front of it (and be chased). Here each mover's
+    track relative to the robot's current velocity is extrapolated evade_horizon_s ahead; if its
+    closest approach comes within its radius plus the robot's inflation plus evade_margin_m, the
+    waypoint is the point that much to the side of the robot (away from the mover's relative
+    line; to the robot's left of it when dead ahead), kept until the mover is no longer on
+    course. The NMPC's obstacle constraints stay in force throughout."""
+
+    def __init__(self, config: GuidanceConfig, inflation_m: float) -> None:
+        self.config = config
+        self.inflation_m = inflation_m
+        self.side = 0.0  # the side taken (+1 left of the mover's relative track, -1 right)
+
+    def reset(self) -> None:
+        self.side = 0.0
+
+    def waypoint(self, pose: np.ndarray, speed_mps: float, obstacles: Sequence[Obstacle]) -> Waypoint | None:
+        cfg = self.config
+        robot_xy = np.asarray(pose[:2], dtype=float)
+        robot_v = speed_mps * np.array([math.cos(pose[2]), math.sin(pose[2])])
+        threat, soonest = None, math.inf
+        for ob in obstacles:
+            if math.hypot(ob.vx_mps, ob.vy_mps) < 0.05:
+                continue
+            rel_p = np.array([ob.x_m, ob.y_m]) - robot_xy
+            rel_v = np.array([ob.vx_mps, ob.vy_mps]) - robot_v
+            vv = float(rel_v @ rel_v)
+            t_c = -float(rel_p @ rel_v) / vv if vv > 1e-9 else 0.0
+            if not 0.0 < t_c < cfg.evade_horizon_s:
+                continue
+            closest = rel_p + t_c * rel_v
+            needed = ob.radius_m + self.inflation_m + cfg.evade_margin_m
+            if np.hypot(*closest) < needed and t_c < soonest:
+                threat, soonest = (closest, rel_v, needed), t_c
+        if threat is None:
+            self.side = 0.0
+            return None
+        closest, rel_v, needed = threat
+        normal = np.array([-rel_v[1], rel_v[0]]) / np.hypot(*rel_v)  # left of the relative track
+        if not self.side:
+            offset = float(closest @ normal)  # > 0: the mover passes left of the robot
+            self.side = -1.0 if offset > 0.02 else 1.0  # step to the other side (left if dead ahead)
+        shift = needed - self.side * float(closest @ normal) * -1.0
+        step = self.side * normal * max(shift, 0.0)
+        target = robot_xy + step
+        heading = math.atan2(step[1], step[0])
+        if math.cos(heading - pose[2]) < 0.0:  # reversing there turns less than driving forward
+            heading += math.pi
+        return Waypoint(float(target[0]), float(target[1]), heading, np.array([robot_xy, target]))
