@@ -45,6 +45,37 @@ class ControlResult:
     def is_fallback(self) -> bool:
         return self.fallback != "none"
 
+    @classmethod
+    def brake(
+        cls,
+        horizon: int,
+        considered: int,
+        ignored: int,
+        solve_time_s: float,
+        status: str,
+        guided: bool = False,
+    ) -> ControlResult:
+        """A braking command (v = 0, omega = 0) with no plan: what a controller applies when no
+        solve gave one."""
+        n = horizon
+        return cls(
+            control=np.zeros(2),
+            predicted_states=np.full((n + 1, 3), np.nan),
+            predicted_controls=np.zeros((n, 2)),
+            clf_slack=np.zeros(n),
+            decay_slack=np.ones(n),
+            predicted_barrier=np.full((considered, n + 1), np.nan),
+            safety_active=0,
+            status=status,
+            success=False,
+            fallback="brake",
+            iterations=-1,
+            solve_time_s=solve_time_s,
+            obstacles_considered=considered,
+            obstacles_ignored=ignored,
+            guided=guided,
+        )
+
 
 class Controller(Protocol):
     """What a simulator needs from a controller."""

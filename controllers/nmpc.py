@@ -33,7 +33,6 @@ from controllers.signals import deliver_after_solve
 
 #: A safety constraint whose residual is at most this (m or m^2) counts as active.
 ACTIVE_TOL = 1e-4
-BRAKE = np.zeros(2)
 
 
 class NMPCController:
@@ -196,20 +195,4 @@ class NMPCController:
     def _result_without_plan(
         self, state: np.ndarray, n_real: int, ignored: int, start: float, status: str
     ) -> ControlResult:
-        n = self.config.horizon
-        return ControlResult(
-            control=BRAKE.copy(),
-            predicted_states=np.full((n + 1, 3), np.nan),
-            predicted_controls=np.zeros((n, 2)),
-            clf_slack=np.zeros(n),
-            decay_slack=np.ones(n),
-            predicted_barrier=np.full((n_real, n + 1), np.nan),
-            safety_active=0,
-            status=status,
-            success=False,
-            fallback="brake",
-            iterations=-1,
-            solve_time_s=time.perf_counter() - start,
-            obstacles_considered=n_real,
-            obstacles_ignored=ignored,
-        )
+        return ControlResult.brake(self.config.horizon, n_real, ignored, time.perf_counter() - start, status)

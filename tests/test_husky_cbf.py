@@ -25,15 +25,34 @@ UNSEEN = sorted((Path(__file__).parent / "scenarios_unseen").glob("*.yaml"))
 HORIZONS = (5, 7, 12)
 
 
+#: Where husky-cbf does not yet meet the tracking definition, measured (2026-11-23): it never
+#: collides there and tracks to 0.04 m once the movers have gone, but four movers cross the 0.7 m
+#: reference circle in the first 40 s and, stepping aside from them, it comes back to the
+#: reference in 7 to 19 s after it becomes reachable, not within rejoin_s = 5 s. Strict xfails:
+#: the day one passes, the suite says so. This is the open part of issue 10.
+NOT_YET_CONVERGED = {
+    ("paper_dynamic_tracking", 5): "rejoined in 18.9 s, not 5 s (RMSE where judged 0.040 m)",
+    ("paper_dynamic_tracking", 7): "rejoined in 13.8 s, not 5 s (RMSE where judged 0.037 m)",
+    ("paper_dynamic_tracking", 12): "rejoined in 7.0 s, not 5 s (RMSE where judged 0.042 m)",
+}
+
+
 def _cells(paths: list[Path]) -> list[object]:
-    return [
-        pytest.param(str(path), n, id=f"{path.stem}-N{n}", marks=pytest.mark.slow)
-        for path in paths
-        for n in HORIZONS
-    ]
+    params = []
+    for path in paths:
+        for n in HORIZONS:
+            marks = [pytest.mark.slow]
+            reason = NOT_YET_CONVERGED.get((path.stem, n))
+            if reason:
+                marks.append(pytest.mark.xfail(strict=True, raises=AssertionError, reason=reason))
+            params.append(pytest.param(str(path), n, id=f"{path.stem}-N{n}", marks=marks))
+    return params
 
 
 def _assert_safe_and_converged(summary: dict[str, object]) -> None:
+    """No collision (physics clearance > 0), converged, and the obstacles shaped the run: the
+    obstacle constraint was active or guidance steered round them at some step (a run that
+    neither touched would test nothing)."""
     measured = (
         f"outcome {summary['outcome']}, min clearance {summary['min_clearance_m']}, "
         f"final error {summary['final_position_error_m']:.3f} m, "
@@ -42,6 +61,9 @@ def _assert_safe_and_converged(summary: dict[str, object]) -> None:
     )
     assert not summary["collided"] and summary["min_clearance_m"] > 0.0, f"collision ({measured})"
     assert summary["converged"], f"not converged ({measured})"
+    assert summary["safety_active_steps"] + summary["guided_steps"] > 0, (
+        f"obstacles never mattered ({measured})"
+    )
 
 
 @pytest.mark.parametrize(("scenario", "horizon"), _cells(shipped_scenarios()))

@@ -110,7 +110,7 @@ class HuskyCBFController:
         target = self._evasion.waypoint(pose, speed_mps, obstacles)
         if target is None and self._nearly_stationary(reference, t):
             circles = inflated_circles(obstacles, self._guidance.inflation_m, 0.0, pose[:2])
-            target = self._approach.waypoint(pose, goal, circles)
+            target = self._approach.waypoint(pose, goal, circles, pre_goal=isinstance(reference, SetPoint))
         if target is not None:
             goal = np.array([target.x_m, target.y_m, target.heading_rad])
         waypoint = self._guidance.waypoint(pose[:2], goal, obstacles) or target
@@ -310,20 +310,4 @@ class HuskyCBFController:
             self._advance(pose, z0[5], braking.states[1, 5], braking.states[1, 3:5].copy())
         else:
             self._yaw_prev = None
-        return ControlResult(
-            control=np.zeros(2),
-            predicted_states=np.full((n + 1, 3), np.nan),
-            predicted_controls=np.zeros((n, 2)),
-            clf_slack=np.zeros(n),
-            decay_slack=np.ones(n),
-            predicted_barrier=np.full((n_real, n + 1), np.nan),
-            safety_active=0,
-            status=status,
-            success=False,
-            fallback="brake",
-            iterations=-1,
-            solve_time_s=time.perf_counter() - start,
-            obstacles_considered=n_real,
-            obstacles_ignored=ignored,
-            guided=guided,
-        )
+        return ControlResult.brake(n, n_real, ignored, time.perf_counter() - start, status, guided)

@@ -196,15 +196,18 @@ class LineApproach:
         self.pre_goal_done = False
         self.back_to = 0.0  # how far behind the goal (m) the current docking backs up
 
-    def waypoint(self, pose: np.ndarray, goal: np.ndarray, circles: np.ndarray) -> Waypoint | None:
+    def waypoint(
+        self, pose: np.ndarray, goal: np.ndarray, circles: np.ndarray, pre_goal: bool = True
+    ) -> Waypoint | None:
         """The approach waypoint, or None to go for the goal itself; `circles` are the inflated
-        obstacles (inflated_circles)."""
+        obstacles (inflated_circles); `pre_goal` False skips the pre-goal (a slow trajectory,
+        whose line is only its tangent)."""
         cfg = self.config
         h = np.array([math.cos(goal[2]), math.sin(goal[2])])
         d = np.asarray(pose[:2], dtype=float) - goal[:2]
         along, lateral = float(d @ h), float(h[0] * d[1] - h[1] * d[0])
         back = 1.5 * cfg.approach_lookahead_m
-        if not self.pre_goal_done:
+        if pre_goal and not self.pre_goal_done:
             pre_goal = goal[:2] - back * h
             blocked = circles.size and np.any(np.hypot(*(circles[:, :2] - pre_goal).T) < circles[:, 2])
             if math.hypot(*(pose[:2] - pre_goal)) < cfg.approach_exit_m * 10 or along > -back:
