@@ -22,12 +22,15 @@ test: $(STAMP)
 	$(BIN)/ruff check .
 	$(BIN)/python -m pytest -n auto -q
 
-# The main job: the paper's point-stabilisation scenario for bt, cbf and relax-cbf at N = 5 and 12
-# in PyBullet -> results table, per-run and comparison figures, and one MP4 per run.
-DEMO_OUT := results/paper_point_stabilisation
+# The main job: the paper's point-stabilisation scenario and a head-on moving obstacle for the
+# paper's bt, cbf and relax-cbf and our husky-cbf at N = 5 and 12 in PyBullet -> results table
+# (with what each outcome means and why), per-run and comparison figures, and one MP4 per run.
+DEMO_OUT := results/demo
+DEMO_JOBS ?= 2
 
 demo: $(STAMP)
-	$(BIN)/husky-sim suite --scenarios paper_point_stabilisation --horizons 5 12 --plots --out $(DEMO_OUT)
+	$(BIN)/husky-sim suite --scenarios paper_point_stabilisation head_on_moving_obstacle \
+		--controllers bt cbf relax-cbf husky-cbf --horizons 5 12 --jobs $(DEMO_JOBS) --plots --out $(DEMO_OUT)
 	for run in $(DEMO_OUT)/runs/*/; do $(BIN)/husky-sim render "$$run" || exit 1; done
 
 bench: $(STAMP)

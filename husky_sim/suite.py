@@ -86,6 +86,8 @@ def matrix(
 #: The scenario suite's horizons (the issue's N in {5, 7, 12}).
 SUITE_HORIZONS = (5, 7, 12)
 SUITE_CONTROLLERS = ("bt", "cbf", "relax-cbf")
+#: Our controller (controllers/husky_cbf), reported beside the paper's three.
+OURS = "husky-cbf"
 
 #: The gamma values the paper uses beyond each scenario file's own: gamma = 0.05 in point
 #: stabilisation ("too low for plain CBF, Relax-CBF still reaches"); in tracking, Relax-CBF
@@ -218,13 +220,35 @@ def write_results(rows: Sequence[dict[str, object]], out_dir: Path) -> tuple[Pat
 
 #: Why the paper's controllers deadlock on a Husky, said once for every results.md that has them.
 PAPER_DEADLOCK_NOTE = (
-    "`bt`, `cbf` and `relax-cbf` are the paper's controllers, reproduced unchanged: a kinematic "
-    "unicycle NMPC whose robot circle is the Husky's real footprint (0.57 m) plus a 0.25 m margin. "
-    "With an obstacle on the straight line to the goal, the short-horizon plan that lowers the cost "
-    "most is to stop at the edge of the inflated circle: going round it costs more within N steps "
-    "than waiting, and Relax-CBF drives s_h to 0, which leaves only B >= 0. So most short-horizon "
-    "runs end `stuck` in front of the obstacle; this is the measured result of the reproduction "
-    "(docs/paper_claims.md), not a fault of the simulator."
+    "`bt`, `cbf` and `relax-cbf` are the paper's controllers, reproduced unchanged, and three things "
+    "make them deadlock on a Husky. (1) The robot is one circle of 0.82 m: the Husky's real footprint "
+    "(0.57 m) plus a 0.25 m margin, so an obstacle near the straight line blocks a wide corridor. "
+    "(2) Their model is a kinematic unicycle that knows neither the Husky's braking (3 m/s^2) nor its "
+    "slow skid-steer yaw response; the margin must cover both, which is why it is that large. "
+    "(3) With an obstacle on the straight line to the goal, the short-horizon plan that lowers the "
+    "paper's stage cost most is to stop at the edge of the inflated circle: going round it costs more "
+    "within N steps than waiting, and Relax-CBF drives s_h to 0, which leaves only B >= 0. So most "
+    "short-horizon runs end `stuck` in front of the obstacle; this is the measured result of the "
+    "reproduction (docs/paper_claims.md), not a fault of the simulator."
+)
+
+#: Why the paper's BT and Relax-CBF collide with a mover that comes at the Husky.
+PAPER_COLLISION_NOTE = (
+    "Against a mover that comes at the robot, BT and Relax-CBF (s_h -> 0, so only B >= 0) plan to "
+    "the very edge of the mover's circle; their unicycle model changes speed at once, but the Husky "
+    "accelerates at most 3 m/s^2 and turns slowly, so it cannot get out of the way in time and the "
+    "mover touches it."
+)
+
+#: What husky-cbf changes, against the three reasons above.
+OURS_NOTE = (
+    f"`{OURS}` is our controller (controllers/husky_cbf), not the paper's: the same Relax-CBF "
+    "NMPC-CLF, changed where the reasons above lie. It plans with the drive's acceleration limits and "
+    "the identified skid-steer yaw-rate lag, so it knows how the Husky brakes and turns; it covers "
+    "the body with three 0.38 m discs (plus a 0.1 m margin) instead of one 0.82 m circle; and when "
+    "the straight way to the goal is blocked it follows a guidance waypoint, taken from a shortest "
+    "path on a cost grid around the obstacles, instead of the goal, so that driving round the "
+    "obstacle is what its short-horizon cost prefers."
 )
 
 
@@ -245,12 +269,18 @@ def _float_or_inf(value: object) -> float:
 
 
 def outcome_legend(rows: Sequence[dict[str, object]]) -> str:
-    """What the outcome words in these rows mean, and why the paper's controllers deadlock."""
+    """What the outcome words in these rows mean, the outcomes per controller, why the paper's
+    controllers deadlock (and collide with movers) on a Husky, and what husky-cbf changes."""
     from husky_sim.metrics import OUTCOME_MEANINGS
 
     seen = {r.get("outcome") for r in rows}
     lines = ["## What the outcomes mean", ""]
     lines += [f"- `{o}`: {meaning}" for o, meaning in OUTCOME_MEANINGS.items() if o in seen]
+    lines += ["", "Outcomes per controller:", ""]
+    for controller in dict.fromkeys(str(r.get("controller")) for r in rows):
+        outcomes = [str(r.get("outcome")) for r in rows if str(r.get("controller")) == controller]
+        counts = ", ".join(f"{outcomes.count(o)} `{o}`" for o in dict.fromkeys(outcomes))
+        lines.append(f"- `{controller}`: {counts} (of {len(outcomes)})")
     stuck_paper = [
         r for r in rows if r.get("outcome") == "stuck" and r.get("controller") in SUITE_CONTROLLERS
     ]
@@ -263,6 +293,13 @@ def outcome_legend(rows: Sequence[dict[str, object]]) -> str:
                 f"{len(near)} of the stuck runs got past the obstacles and stopped within "
                 f"{NEAR_GOAL_M:g} m of the goal, beside it. {BESIDE_GOAL_NOTE}",
             ]
+    collided_paper = [
+        r for r in rows if r.get("outcome") == "collided" and r.get("controller") in ("bt", "relax-cbf")
+    ]
+    if collided_paper:
+        lines += ["", f"{len(collided_paper)} runs of BT or Relax-CBF are `collided`. {PAPER_COLLISION_NOTE}"]
+    if any(r.get("controller") == OURS for r in rows):
+        lines += ["", OURS_NOTE]
     return "\n".join(lines) + "\n"
 
 

@@ -60,8 +60,21 @@ def test_suite_runs_in_parallel_and_writes_results_and_figures(tmp_path: Path) -
     scenario = _short_scenario(tmp_path, "husky_point_stabilisation", 4.0)
     out = tmp_path / "suite"
     code = main(
-        ["suite", "--scenarios", str(scenario), "--controllers", "bt", "cbf", "--horizons", "5",
-         "--jobs", "2", "--quiet", "--out", str(out)]
+        [
+            "suite",
+            "--scenarios",
+            str(scenario),
+            "--controllers",
+            "bt",
+            "cbf",
+            "--horizons",
+            "5",
+            "--jobs",
+            "2",
+            "--quiet",
+            "--out",
+            str(out),
+        ]
     )
     assert code == 0
     with (out / "results.csv").open() as f:
@@ -92,8 +105,10 @@ def test_a_crashing_cell_is_reported_not_raised() -> None:
 
 
 def test_markdown_table_formats_missing_and_float_values() -> None:
-    text = markdown_table([{"scenario": "s", "horizon": 5, "min_clearance_m": 0.12345, "outcome": None}],
-                          ("scenario", "horizon", "min_clearance_m", "outcome"))
+    text = markdown_table(
+        [{"scenario": "s", "horizon": 5, "min_clearance_m": 0.12345, "outcome": None}],
+        ("scenario", "horizon", "min_clearance_m", "outcome"),
+    )
     assert text.splitlines()[2] == "| s | 5 | 0.123 | - |"
 
 
@@ -117,8 +132,15 @@ def test_grade() -> None:
 
 def _series(err: np.ndarray, v: np.ndarray, w: np.ndarray, dt: float = 0.1) -> dict[str, np.ndarray]:
     t = dt * np.arange(len(err))
-    return {"t_s": t, "x_m": err, "y_m": 0 * t, "ref_x_m": 0 * t, "ref_y_m": 0 * t,
-            "v_cmd_mps": v, "omega_cmd_radps": w}
+    return {
+        "t_s": t,
+        "x_m": err,
+        "y_m": 0 * t,
+        "ref_x_m": 0 * t,
+        "ref_y_m": 0 * t,
+        "v_cmd_mps": v,
+        "omega_cmd_radps": w,
+    }
 
 
 def test_deviation_onset_smoothness_and_stopped_time() -> None:
@@ -149,12 +171,29 @@ def test_required_cells_cover_every_claim_and_kinematic_runs_use_the_papers_radi
 
 def _row(controller: str, horizon: int, gamma: float | None, ok: bool, **extra: object) -> dict[str, object]:
     t = np.arange(50) * 0.1
-    row = {"controller": controller, "horizon": horizon, "gamma": gamma, "tau_s": 0.1, "model": "kinematic",
-           "outcome": "reached" if ok else "stuck", "converged": ok, "collided": False,
-           "min_clearance_m": 0.2, "final_position_error_m": 0.0 if ok else 3.0, "reversals": 0,
-           "v_min_mps": -1.0, "v_max_mps": 1.0, "omega_max_radps": 0.8,
-           "t_s": t, "x_m": 0 * t, "y_m": 0 * t, "ref_x_m": 0 * t, "ref_y_m": 0 * t,
-           "v_cmd_mps": 0 * t, "omega_cmd_radps": 0 * t}
+    row = {
+        "controller": controller,
+        "horizon": horizon,
+        "gamma": gamma,
+        "tau_s": 0.1,
+        "model": "kinematic",
+        "outcome": "reached" if ok else "stuck",
+        "converged": ok,
+        "collided": False,
+        "min_clearance_m": 0.2,
+        "final_position_error_m": 0.0 if ok else 3.0,
+        "reversals": 0,
+        "v_min_mps": -1.0,
+        "v_max_mps": 1.0,
+        "omega_max_radps": 0.8,
+        "t_s": t,
+        "x_m": 0 * t,
+        "y_m": 0 * t,
+        "ref_x_m": 0 * t,
+        "ref_y_m": 0 * t,
+        "v_cmd_mps": 0 * t,
+        "omega_cmd_radps": 0 * t,
+    }
     row.update(extra)
     return row
 
@@ -170,13 +209,19 @@ def test_prediction_time_needs_bt_to_converge_somewhere_for_a_reduction() -> Non
     from husky_sim.claims import POINT, claim_prediction_time
 
     ok_from = {"bt": None, "cbf": None, "relax-cbf": 5}
-    rows = {(POINT, c, n): _row(c, n, None, ok_from[c] is not None and n >= ok_from[c])
-            for c in ("bt", "cbf", "relax-cbf") for n in (5, 12)}
+    rows = {
+        (POINT, c, n): _row(c, n, None, ok_from[c] is not None and n >= ok_from[c])
+        for c in ("bt", "cbf", "relax-cbf")
+        for n in (5, 12)
+    }
     verdict = claim_prediction_time(_runs(rows), "kinematic", [POINT], (5, 12), (1.2, 0.5))
     assert verdict.verdict == PARTLY and "BT never converges" in verdict.evidence
     ok_from["bt"] = 12
-    rows = {(POINT, c, n): _row(c, n, None, ok_from[c] is not None and n >= ok_from[c])
-            for c in ("bt", "cbf", "relax-cbf") for n in (5, 12)}
+    rows = {
+        (POINT, c, n): _row(c, n, None, ok_from[c] is not None and n >= ok_from[c])
+        for c in ("bt", "cbf", "relax-cbf")
+        for n in (5, 12)
+    }
     verdict = claim_prediction_time(_runs(rows), "kinematic", [POINT], (5, 12), (1.2, 0.5))
     assert verdict.verdict == REPRODUCED and "58.33 %" in verdict.evidence
 
@@ -230,3 +275,20 @@ def test_results_md_explains_every_outcome_word_it_shows() -> None:
         assert f"- `{word}`: {OUTCOME_MEANINGS[word]}" in text
     assert "- `reached`" not in text  # only the words the table shows
     assert "2 of 4 runs are `stuck`" in text and "1 of the stuck runs" in text and "beside" in text
+
+
+def test_results_md_says_why_the_paper_controllers_fail_and_what_husky_cbf_changes() -> None:
+    from husky_sim.suite import OURS, OURS_NOTE, PAPER_COLLISION_NOTE, outcome_legend
+
+    paper_only = [
+        {"controller": "bt", "outcome": "collided", "final_position_error_m": 4.0},
+        {"controller": "relax-cbf", "outcome": "stuck", "final_position_error_m": 6.5},
+    ]
+    text = outcome_legend(paper_only)
+    assert "1 runs of BT or Relax-CBF are `collided`" in text and PAPER_COLLISION_NOTE in text
+    assert OURS_NOTE not in text and "0.82 m" in text  # the deadlock note names the circle
+    ours = [{"controller": OURS, "outcome": "reached"}, {"controller": OURS, "outcome": "timeout"}]
+    text = outcome_legend(paper_only + ours)
+    assert OURS_NOTE in text and "three 0.38 m discs" in text
+    assert f"- `{OURS}`: 1 `reached`, 1 `timeout` (of 2)" in text
+    assert "- `bt`: 1 `collided` (of 1)" in text
