@@ -4,10 +4,11 @@ Per control step:
 1. the initial state of the extended model: the measured pose, the commands the drive is applying
    (the last command, which every plan keeps within the drive's acceleration limits) and the body
    yaw rate (the model's prediction corrected by the measured heading change);
-2. the reference: the paper's, unless the straight way to it is blocked; then a guidance waypoint
-   (guidance.py);
-3. the nearest obstacles predicted at constant velocity, each inflated by the margin, and movers
-   by a margin growing with their predicted travel;
+2. the reference: the paper's, unless guidance (guidance.py) gives a waypoint: out of the way of a
+   mover on a collision course, onto a set-point's line near the goal, or along a shortest path
+   when the straight way is blocked;
+3. the nearest obstacles predicted at constant velocity, each inflated by the margin; a mover
+   covers its next mover_sweep_s of travel at every step, with a margin growing with that travel;
 4. the hard OCP (ocp.py); if IPOPT fails, the same OCP with an exactly penalised obstacle slack
    (a feasible hard plan is its optimum, so this also recovers solves that failed from a poor
    start); if that fails too, again from each of controllers.recovery's guesses; else brake.
@@ -22,7 +23,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from controllers.backends import RawSolution
+from controllers.backends import IpoptSolver, RawSolution
 from controllers.husky_cbf.config import HuskyCBFConfig
 from controllers.husky_cbf.footprint import disc_cover
 from controllers.husky_cbf.guidance import Guidance, LineApproach, MoverEvasion, inflated_circles
@@ -205,7 +206,7 @@ class HuskyCBFController:
         return np.array(out)
 
     # -- solving --------------------------------------------------------------------------
-    def _solve(self, solver: object, layout: Layout, p: np.ndarray, guess: ExtendedPlan) -> RawSolution:
+    def _solve(self, solver: IpoptSolver, layout: Layout, p: np.ndarray, guess: ExtendedPlan) -> RawSolution:
         with deliver_after_solve():  # an interrupt is delivered, never taken for a failed solve
             try:
                 return solver.solve(p, guess.to_vector(layout))

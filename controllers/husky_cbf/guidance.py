@@ -115,7 +115,11 @@ class Guidance:
             j0, j1 = np.searchsorted(xs, [cx - r, cx + r])
             gx, gy = np.meshgrid(xs[j0:j1], ys[i0:i1])
             occupied[i0:i1, j0:j1] |= (gx - cx) ** 2 + (gy - cy) ** 2 < r * r
-        cell = lambda p: (int(round((p[1] - lo[1]) / res)), int(round((p[0] - lo[0]) / res)))  # noqa: E731
+
+        def cell(point: np.ndarray) -> tuple[int, int]:
+            """(row, column) of the grid cell holding a point."""
+            return int(round((point[1] - lo[1]) / res)), int(round((point[0] - lo[0]) / res))
+
         si, sj = cell(start)
         occupied[si, sj] = False
         clearance = ndimage.distance_transform_edt(~occupied) * res
@@ -283,7 +287,7 @@ class MoverEvasion:
         if not self.side:
             offset = float(closest @ normal)  # > 0: the mover passes left of the robot
             self.side = -1.0 if offset > 0.02 else 1.0  # step to the other side (left if dead ahead)
-        shift = needed - self.side * float(closest @ normal) * -1.0
+        shift = needed + self.side * float(closest @ normal)  # to `needed` beyond the mover's line
         step = self.side * normal * max(shift, 0.0)
         target = robot_xy + step
         heading = math.atan2(step[1], step[0])
