@@ -473,7 +473,7 @@ class Scenario(_Strict):
                 yaw.gain,
                 yaw.time_constant_s,
                 half_separation_m=0.5 * geometry.track_width_m * drive.wheel_separation_multiplier,
-                max_wheel_speed_mps=HuskyCBFConfig.wheel_speed_ratio * drive.max_linear_mps,
+                max_linear_mps=drive.max_linear_mps,
             ),
             footprint=Footprint(*geometry.footprint_half_extents_m),
             omega_cmd_max_radps=drive.max_angular_radps,

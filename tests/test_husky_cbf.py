@@ -100,7 +100,7 @@ def test_discs_cover_the_urdf_footprint_tighter_than_one_circle() -> None:
 
 def test_extended_model_lags_the_yaw_rate_and_ramps_the_speed() -> None:
     response = RobotResponse(
-        3.0, 6.0, yaw_gain=0.5, yaw_time_constant_s=0.4, half_separation_m=0.5, max_wheel_speed_mps=1.0
+        3.0, 6.0, yaw_gain=0.5, yaw_time_constant_s=0.4, half_separation_m=0.5, max_linear_mps=1.0
     )
     step = extended_step(0.1, response)
     z = np.array([0.0, 0.0, 0.0, 0.0, 1.0, 0.0])  # commanded 1 rad/s, body at rest

@@ -30,16 +30,16 @@ class RobotResponse:
     """How the drive follows a command: acceleration limits (m/s^2, rad/s^2) of the commanded
     velocities, the body yaw rate's first-order lag behind the commanded yaw rate,
     d(omega_body)/dt = (yaw_gain * omega_cmd - omega_body) / yaw_time_constant_s, and the wheel
-    speed limit: each side's wheels run at v -+ half_separation_m * omega_cmd (m/s, with the
-    drive's effective separation), at most max_wheel_speed_mps. Beyond it a skid-steer no longer
-    does what a unicycle would (commanded 1 m/s and 2 rad/s, a Husky skidded on at 1.3 m/s)."""
+    drive's linear velocity limit max_linear_mps (m/s); each side's wheels run at
+    v -+ half_separation_m * omega_cmd (m/s, with the drive's effective separation), which
+    HuskyCBFConfig.wheel_speed_ratio bounds."""
 
     max_linear_accel_mps2: float
     max_angular_accel_radps2: float
     yaw_gain: float
     yaw_time_constant_s: float
     half_separation_m: float
-    max_wheel_speed_mps: float
+    max_linear_mps: float
 
     def __post_init__(self) -> None:
         for name in (
@@ -48,7 +48,7 @@ class RobotResponse:
             "yaw_gain",
             "yaw_time_constant_s",
             "half_separation_m",
-            "max_wheel_speed_mps",
+            "max_linear_mps",
         ):
             _positive(f"response.{name}", getattr(self, name))
 
@@ -137,9 +137,9 @@ class HuskyCBFConfig:
     footprint: Footprint
     omega_cmd_max_radps: float = 2.0  # commanded yaw-rate bound (the Husky's drive limit, rad/s)
     #: each side's wheel speed at most this times the drive's linear limit (response's
-    #: max_wheel_speed_mps is set from it): commanded 1 m/s and 2 rad/s (wheels at 2 m/s), the
-    #: PyBullet Husky skidded on at 1.3 m/s; with the limit at 1x, it could no longer turn near
-    #: its goal while moving
+    #: max_linear_mps): beyond it a skid-steer no longer does what a unicycle would (commanded
+    #: 1 m/s and 2 rad/s, wheels at 2 m/s, the PyBullet Husky skidded on at 1.3 m/s); with the
+    #: limit at 1x, it could no longer turn near its goal while moving
     wheel_speed_ratio: float = 1.5
     #: margin (m) between each body disc and an obstacle: sensing noise and the drive's
     #: tracking error; braking distance is in the model, so this need not cover it.

@@ -95,22 +95,24 @@ class HuskyCBFController:
         pose: np.ndarray,
         speed_mps: float,
         reference: Reference,
+        sampled: tuple[np.ndarray, np.ndarray],
+        stationary: bool,
         obstacles: Sequence[Obstacle],
         t: float,
     ) -> tuple[np.ndarray, np.ndarray, bool]:
+        """The states and feed-forward (N+1, 3), (N, 2) the OCP tracks, and whether they are a
+        guidance waypoint; `sampled` is the reference sampled along the horizon."""
         cfg, base = self.config, self.config.nmpc
-        ref_states, ref_controls = reference.sample(t, base.tau_s, base.horizon)
+        ref_states, ref_controls = sampled
         w = cfg.omega_cmd_max_radps
         ref_controls[:, 1] = np.clip(ref_controls[:, 1] / cfg.response.yaw_gain, -w, w)
+        circles = inflated_circles(obstacles, self._guidance.inflation_m, 0.0, pose[:2])
         goal = (
-            ref_states[-1]
-            if isinstance(reference, SetPoint)
-            else self._tracking_goal(pose, reference, obstacles, t)
+            ref_states[-1] if isinstance(reference, SetPoint) else self._tracking_goal(reference, circles, t)
         )
         # where to go now, in priority: out of a mover's way, onto a set-point's line, the goal
         target = self._evasion.waypoint(pose, speed_mps, obstacles)
-        if target is None and self._nearly_stationary(reference, t):
-            circles = inflated_circles(obstacles, self._guidance.inflation_m, 0.0, pose[:2])
+        if target is None and stationary:
             target = self._approach.waypoint(pose, goal, circles, pre_goal=isinstance(reference, SetPoint))
         if target is not None:
             goal = np.array([target.x_m, target.y_m, target.heading_rad])
@@ -120,12 +122,10 @@ class HuskyCBFController:
         target = [waypoint.x_m, waypoint.y_m, waypoint.heading_rad]
         return np.tile(target, (base.horizon + 1, 1)), np.zeros((base.horizon, 2)), True
 
-    def _tracking_goal(
-        self, pose: np.ndarray, reference: Reference, obstacles: Sequence[Obstacle], t: float
-    ) -> np.ndarray:
-        """The reference a preview ahead, or the first later one outside every inflated obstacle."""
+    def _tracking_goal(self, reference: Reference, circles: np.ndarray, t: float) -> np.ndarray:
+        """The reference a preview ahead, or the first later one outside every inflated obstacle
+        (`circles`, inflated_circles)."""
         g = self.config.guidance
-        circles = inflated_circles(obstacles, self._guidance.inflation_m, 0.0, pose[:2])
         times = t + g.tracking_preview_s + np.arange(0.0, TRACKING_SEARCH_S, self.tau_s)
         states = reference.sample(float(times[0]), self.tau_s, len(times) - 1)[0]
         for state in states:
@@ -151,24 +151,23 @@ class HuskyCBFController:
         )
         return centres, inflated
 
-    def _nearly_stationary(self, reference: Reference, t: float) -> bool:
+    def _nearly_stationary(self, reference: Reference, ref_speed_mps: float) -> bool:
         """A set-point, or a trajectory slower than approach_max_reference_speed_mps now: a robot
         must then be brought onto it like onto a set-point (it will not come to the robot)."""
-        if isinstance(reference, SetPoint):
-            return True
-        speed = float(reference.sample(t, self.tau_s, 1)[1][0, 0])
-        return speed < self.config.guidance.approach_max_reference_speed_mps
+        return (
+            isinstance(reference, SetPoint)
+            or ref_speed_mps < self.config.guidance.approach_max_reference_speed_mps
+        )
 
-    def _speed_caps(self, z0: np.ndarray, reference: Reference, t: float) -> np.ndarray:
-        """|v| cap per predicted step (m/s): approach_speed_mps within slow_radius_m of a
-        (nearly) stationary reference (reached from the current speed at the drive's
+    def _speed_caps(self, z0: np.ndarray, goal: np.ndarray, stationary: bool) -> np.ndarray:
+        """|v| cap per predicted step (m/s): approach_speed_mps within slow_radius_m of the `goal`
+        (m) of a (nearly) stationary reference (reached from the current speed at the drive's
         deceleration), else v_max."""
         cfg, base = self.config, self.config.nmpc
         v_max = max(base.v_max_mps, -base.v_min_mps)
         steps = np.arange(1, base.horizon + 1)
-        if not self._nearly_stationary(reference, t):
+        if not stationary:
             return np.full(base.horizon, v_max)
-        goal = reference.state_at(t)
         if math.hypot(z0[0] - goal[0], z0[1] - goal[1]) > cfg.guidance.slow_radius_m:
             return np.full(base.horizon, v_max)
         braking = abs(z0[3]) - cfg.response.max_linear_accel_mps2 * base.tau_s * steps
@@ -226,10 +225,15 @@ class HuskyCBFController:
                 np.full(3, np.nan), n_real, len(obstacles) - n_real, start, "invalid state", False
             )
         z0 = self._initial_state(pose)
-        ref_states, ref_controls, guided = self._reference(pose, float(z0[3]), reference, obstacles, t)
+        sampled = reference.sample(t, base.tau_s, base.horizon)
+        now = sampled[0][0].copy()  # the reference at t, before guidance replaces it
+        stationary = self._nearly_stationary(reference, float(sampled[1][0, 0]))
+        ref_states, ref_controls, guided = self._reference(
+            pose, float(z0[3]), reference, sampled, stationary, obstacles, t
+        )
         centres, radii = self._obstacles(pose, obstacles)
         lookahead = cfg.terminal_lookahead_m * (-1.0 if self._approach.docking else 1.0)
-        caps = self._speed_caps(z0, reference, t)
+        caps = self._speed_caps(z0, now, stationary)
         p = pack_parameters(z0, ref_states, ref_controls, centres, radii, caps, lookahead)
         guess = self._warm_guess(z0)
         hard, soft = self._hard_problem.layout, self._soft_problem.layout

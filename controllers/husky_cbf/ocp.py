@@ -206,7 +206,7 @@ def build_problem(config: HuskyCBFConfig, horizon: int, slots: int, soft: bool) 
             braking = z[3, n] ** 2 / (2.0 * resp.max_linear_accel_mps2)
             safety.append(dist_sq[n] - (r_sum[n] + braking) ** 2 + sigma[slot, n - 1])
     caps = [speed_caps[m] - z[3, m + 1] for m in range(n)] + [speed_caps[m] + z[3, m + 1] for m in range(n)]
-    wheel, half = resp.max_wheel_speed_mps, resp.half_separation_m
+    wheel, half = cfg.wheel_speed_ratio * resp.max_linear_mps, resp.half_separation_m
     for m in range(1, n + 1):  # both sides' wheel speeds within the limit
         for side in (1.0, -1.0):
             caps += [wheel - (z[3, m] + side * half * z[4, m]), wheel + (z[3, m] + side * half * z[4, m])]
