@@ -137,7 +137,10 @@ def _cmd_run(args: argparse.Namespace) -> int:
     horizon, gamma = sc.controller.horizon, sc.controller.gamma
     interrupts.begin_run()
     out = Path(args.out) if args.out else default_run_dir(sc.name, args.controller, horizon, gamma, sc.seed)
-    summary = run_scenario(sc, args.controller, out_dir=out)  # creates `out` (or one-line error) first
+    if args.live is not None:
+        print(f"streaming to Foxglove: open ws://127.0.0.1:{args.live} in Foxglove", flush=True)
+    # creates `out` (or one-line error) first
+    summary = run_scenario(sc, args.controller, out_dir=out, live_port=args.live)
     clearance = summary["min_clearance_m"]
     clearance_text = "n/a" if clearance is None else f"{clearance:.3f} m"
     print(
@@ -307,6 +310,119 @@ def _cmd_replay(args: argparse.Namespace) -> int:
     return 0
 
 
+def _ros2_settings(args: argparse.Namespace, **fixed: object):
+    """Ros2Settings from the command line's topic, frame and domain options."""
+    from dataclasses import fields
+
+    from husky_sim.ros2.transport import Ros2Settings
+
+    given = {
+        f.name: getattr(args, f.name) for f in fields(Ros2Settings) if getattr(args, f.name, None) is not None
+    }
+    return Ros2Settings(**{**given, **fixed})
+
+
+def _add_ros2_arguments(parser: argparse.ArgumentParser) -> None:
+    from dataclasses import fields
+
+    from husky_sim.ros2.transport import MAX_DOMAIN_ID, Ros2Settings
+
+    for f in fields(Ros2Settings):
+        if f.name.endswith(("_topic", "_frame")):
+            flag = "--" + f.name.replace("_", "-")
+            parser.add_argument(flag, default=None, help=f"default {f.default}")
+    parser.add_argument(
+        "--domain-id",
+        type=_number_in(int, 0, MAX_DOMAIN_ID),
+        default=None,
+        help=f"DDS domain in [0, {MAX_DOMAIN_ID}] (default: ROS_DOMAIN_ID, else 0)",
+    )
+
+
+def _add_live_argument(parser: argparse.ArgumentParser) -> None:
+    from husky_sim.foxglove_record import LIVE_PORT
+
+    parser.add_argument(
+        "--live",
+        type=_number_in(int, 1, 65535),
+        nargs="?",
+        const=LIVE_PORT,
+        default=None,
+        metavar="PORT",
+        help=f"also stream the run to Foxglove's WebSocket server on 127.0.0.1:PORT (default {LIVE_PORT})",
+    )
+
+
+def _cmd_serve(args: argparse.Namespace) -> int:
+    from pathlib import Path
+
+    from husky_sim.ros2.node import serve
+    from husky_sim.run import RESULTS_DIR, run_dir_name
+    from husky_sim.scenario import load_scenario
+
+    interrupts.check()
+    sc = load_scenario(args.scenario).with_overrides(args.horizon, args.gamma, None)
+    settings = _ros2_settings(args, use_sim_time=args.use_sim_time, localhost_only=args.localhost_only)
+    domain = settings.resolved_domain_id()  # a bad ROS_DOMAIN_ID is a one-line error before anything runs
+    controller = sc.make_controller(args.controller)
+    interrupts.begin_run()
+    horizon, gamma = sc.controller.horizon, sc.controller.gamma
+    out = (
+        Path(args.out)
+        if args.out
+        else RESULTS_DIR / ("serve__" + run_dir_name(sc.name, args.controller, horizon, gamma, sc.seed))
+    )
+    print(
+        f"serving {args.controller} N={horizon} on DDS domain {domain}: {settings.odometry_topic} + "
+        f"{settings.obstacles_topic} + {settings.goal_topic} -> {settings.cmd_vel_topic} "
+        f"every {sc.tau_s:g} s ({'sim' if settings.use_sim_time else 'wall'} clock); log -> {out}",
+        flush=True,
+    )
+    try:
+        stats = serve(controller, sc.reference_object(), sc.tau_s, settings, out, duration_s=args.duration)
+        reason = f"after {args.duration:g} s"
+    except interrupts.RunInterrupted as exc:  # the normal way to stop a node: it has sent a zero command
+        import signal
+
+        reason = f"by {signal.Signals(exc.signum).name}"
+        interrupts.reset()
+        stats = None
+    print(f"node stopped {reason} with a zero command; counts in {out / 'serve_summary.json'}")
+    if stats is not None:
+        print(", ".join(f"{k} {v}" for k, v in stats.events.items()))
+    return 0
+
+
+def _cmd_rehearse(args: argparse.Namespace) -> int:
+    from pathlib import Path
+
+    from husky_sim.ros2.rehearse import rehearse
+    from husky_sim.run import RESULTS_DIR, run_dir_name
+    from husky_sim.scenario import load_scenario
+
+    interrupts.check()
+    sc = load_scenario(args.scenario).with_overrides(args.horizon, args.gamma, args.seed)
+    horizon, gamma = sc.controller.horizon, sc.controller.gamma
+    interrupts.begin_run()
+    name = "rehearse__" + run_dir_name(sc.name, args.controller, horizon, gamma, sc.seed)
+    out = Path(args.out) if args.out else RESULTS_DIR / name
+    if args.live is not None:
+        print(f"streaming to Foxglove: open ws://127.0.0.1:{args.live} in Foxglove", flush=True)
+    summary = rehearse(sc, args.controller, out, args.domain_id, args.reply_timeout, live_port=args.live)
+    transport = summary["transport"]
+    latency = transport["cmd_vel_latency_ms"]
+    latency_text = (
+        "n/a" if latency["median"] is None else f"{latency['median']:.2f} ms (p99 {latency['p99']:.2f})"
+    )
+    clearance = summary["min_clearance_m"]
+    print(
+        f"{sc.name} {args.controller} N={horizon} over DDS: {summary['outcome']}, min clearance "
+        f"{'n/a' if clearance is None else f'{clearance:.3f} m'}, /cmd_vel latency median {latency_text}, "
+        f"{transport['reply_timeouts']} replies missing -> {out}"
+    )
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     from husky_sim.rendering import add_render_arguments
 
@@ -322,8 +438,50 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--seed", type=_seed, default=None, help="noise and random-field seed")
     run.add_argument("--out", type=_path, default=None, help="output directory (default results/<run>)")
     run.add_argument("--video", action="store_true", help="then render OUT/video_CAMERA.mp4 from its trace")
+    _add_live_argument(run)
     add_render_arguments(run)
     run.set_defaults(func=_cmd_run)
+    serve = sub.add_parser(
+        "serve",
+        help="run a controller as a ROS 2 node over DDS: odometry, goal, obstacles in; /cmd_vel, /plan out",
+    )
+    serve.add_argument(
+        "scenario", help="a scenario YAML path or shipped name: the controller's parameters and reference"
+    )
+    serve.add_argument("--controller", choices=CONTROLLER_CHOICES, default="husky-cbf")
+    serve.add_argument("--horizon", type=_horizon, default=None, help="prediction steps N in [1, 50]")
+    serve.add_argument("--gamma", type=_unit_float, default=None, help="CBF decay rate in [0, 1]")
+    serve.add_argument("--out", type=_path, default=None, help="folder for serve.csv and serve_summary.json")
+    serve.add_argument(
+        "--duration", type=_number_in(float, 0.0, 1e7), default=None, help="stop after this many s"
+    )
+    serve.add_argument("--use-sim-time", action="store_true", help="the node's clock is /clock (a simulator)")
+    serve.add_argument("--localhost-only", action="store_true", help="keep DDS traffic on 127.0.0.1")
+    _add_ros2_arguments(serve)
+    serve.set_defaults(func=_cmd_serve)
+    rehearse = sub.add_parser(
+        "rehearse", help="drive the PyBullet Husky from a `serve` node in another process, over DDS"
+    )
+    rehearse.add_argument("scenario", help="a scenario YAML path or the name of a shipped scenario")
+    rehearse.add_argument("--controller", choices=CONTROLLER_CHOICES, default="husky-cbf")
+    rehearse.add_argument("--horizon", type=_horizon, default=None, help="prediction steps N in [1, 50]")
+    rehearse.add_argument("--gamma", type=_unit_float, default=None, help="CBF decay rate in [0, 1]")
+    rehearse.add_argument("--seed", type=_seed, default=None, help="noise and random-field seed")
+    rehearse.add_argument(
+        "--out", type=_path, default=None, help="output directory (default results/rehearse__<run>)"
+    )
+    rehearse.add_argument(
+        "--domain-id",
+        type=_number_in(int, 0, 232),
+        default=None,
+        help="DDS domain (default 100 + pid %% 100)",
+    )
+    rehearse.add_argument(
+        "--reply-timeout", type=_number_in(float, 0.01, 600.0), default=10.0,
+        help="wall s to wait for each /cmd_vel before braking (counted)",
+    )  # fmt: skip
+    _add_live_argument(rehearse)
+    rehearse.set_defaults(func=_cmd_rehearse)
     render = sub.add_parser("render", help="render a recorded run directory to an MP4 (no re-solve)")
     render.add_argument("run_dir", help="a directory written by `husky-sim run` (needs its trace.npz)")
     render.add_argument(

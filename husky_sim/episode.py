@@ -20,10 +20,11 @@ import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Protocol
 
 import numpy as np
 
-from controllers import Controller, Reference, SetPoint
+from controllers import Controller, ControlResult, Reference, SetPoint
 from controllers.model import wrap_angle
 from husky_sim import interrupts
 from husky_sim.collision import ClearanceMonitor
@@ -172,12 +173,21 @@ def _reference_error(state: np.ndarray, ref: np.ndarray) -> tuple[float, float]:
     return float(np.hypot(*(state[:2] - ref[:2]))), abs(float(wrap_angle(state[2] - ref[2])))
 
 
+class StepObserver(Protocol):
+    """Something that watches the loop (a recorder): called after each control step's row is
+    logged, with the row, the controller's result and the true obstacle centres (m) at the step's
+    start. It only reads, so it cannot change the physics."""
+
+    def on_step(self, row: dict[str, object], result: ControlResult, obstacle_xy: np.ndarray) -> None: ...
+
+
 def run_episode(
     controller: Controller,
     reference: Reference,
     config: EpisodeConfig,
     log_path: Path | None = None,
     robot_radius_m: float | None = None,
+    observer: StepObserver | None = None,
 ) -> EpisodeResult:
     """Run one closed-loop episode in a fresh PyBullet world and return its metrics."""
     wall_start = time.perf_counter()
@@ -191,7 +201,7 @@ def run_episode(
     world = World(config.world)
     log = _Log(log_path)
     try:
-        return _run(world, log, controller, reference, config, robot_radius_m, wall_start)
+        return _run(world, log, controller, reference, config, robot_radius_m, wall_start, observer)
     finally:
         log.close()
         world.close()
@@ -205,6 +215,7 @@ def _run(
     config: EpisodeConfig,
     robot_radius_m: float | None,
     wall_start: float,
+    observer: StepObserver | None,
 ) -> EpisodeResult:
     robot = HuskyRobot(world.client, config.start, config.wheel_friction, config.payload_kg)
     drive = SkidSteerDrive(config.drive, robot.geometry.wheel_radius_m, robot.geometry.track_width_m)
@@ -296,6 +307,8 @@ def _run(
                 log.write(row)
                 rows.append(row)
                 plans.append(result.predicted_states)
+            if observer is not None:
+                observer.on_step(row, result, world.obstacle_centres(t))
 
             t_next = t + config.tau_s
             if clearance <= 0.0:

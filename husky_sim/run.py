@@ -8,10 +8,12 @@ import re
 import signal
 from pathlib import Path
 
-from controllers import SAFETY_CONSTRAINTS, NMPCController, SafetyConstraint
+from controllers import SAFETY_CONSTRAINTS, Controller, NMPCController, Reference, SafetyConstraint
 from husky_sim import interrupts
 from husky_sim.episode import run_episode
+from husky_sim.foxglove_record import MCAP_NAME, FoxgloveRecorder
 from husky_sim.interrupts import RunInterrupted
+from husky_sim.robot_geometry import load_geometry
 from husky_sim.scenario import Scenario, load_scenario
 
 #: Where runs go unless --out says otherwise.
@@ -68,6 +70,37 @@ def write_summary(out_dir: Path, summary: dict[str, object]) -> None:
         tmp.replace(out_dir / "summary.json")
 
 
+def controller_header(
+    sc: Scenario,
+    controller: str,
+    horizon: int | None = None,
+    gamma: float | None = None,
+    seed: int | None = None,
+) -> dict[str, object]:
+    """The summary fields that say which controller ran with which settings (from the scenario and
+    the overrides; building the controller is not needed)."""
+    if controller == "husky-cbf":
+        full = sc.husky_cbf_config(horizon, gamma)
+        nmpc_config, omega_max = full.nmpc, full.omega_cmd_max_radps
+    else:
+        nmpc_config = sc.controller_config(controller, horizon, gamma)
+        omega_max = nmpc_config.omega_max_radps
+    return {
+        "scenario": sc.name,
+        "controller": controller,
+        "horizon": nmpc_config.horizon,
+        "gamma": nmpc_config.gamma,
+        "seed": sc.seed if seed is None else seed,
+        "model": "physics",
+        "tau_s": nmpc_config.tau_s,
+        "prediction_time_s": nmpc_config.horizon * nmpc_config.tau_s,
+        "v_min_mps": nmpc_config.v_min_mps,
+        "v_max_mps": nmpc_config.v_max_mps,
+        "omega_max_radps": omega_max,
+        "robot_radius_m": nmpc_config.robot_radius_m,
+    }
+
+
 def run_scenario(
     scenario: Scenario | str,
     controller: SafetyConstraint,
@@ -75,43 +108,45 @@ def run_scenario(
     gamma: float | None = None,
     seed: int | None = None,
     out_dir: Path | None = None,
+    implementation: Controller | None = None,
+    live_port: int | None = None,
 ) -> dict[str, object]:
-    """Run a scenario; return the summary (also written to out_dir/summary.json, with the log)."""
+    """Run a scenario; return the summary (also written to out_dir/summary.json, with the log,
+    the trace and run.mcap for Foxglove; `live_port` also streams it to Foxglove while it runs).
+
+    `implementation` runs in the controller's place (a rehearsal's DDS robot, whose decisions come
+    from the named controller in another process); by default the named controller is built here.
+    """
     sc = load_scenario(scenario) if isinstance(scenario, str) else scenario
-    nmpc = sc.make_controller(controller, horizon, gamma)
-    nmpc_config = getattr(nmpc.config, "nmpc", nmpc.config)  # husky-cbf: its paper part
+    header = controller_header(sc, controller, horizon, gamma, seed)
+    robot_radius_m = header.pop("robot_radius_m")
+    nmpc = implementation if implementation is not None else sc.make_controller(controller, horizon, gamma)
     episode_config = sc.episode_config(seed)
-    header: dict[str, object] = {
-        "scenario": sc.name,
-        "controller": controller,
-        "horizon": nmpc_config.horizon,
-        "gamma": nmpc_config.gamma,
-        "seed": episode_config.seed,
-        "model": "physics",
-        "tau_s": nmpc_config.tau_s,
-        "prediction_time_s": nmpc_config.horizon * nmpc_config.tau_s,
-        "v_min_mps": nmpc_config.v_min_mps,
-        "v_max_mps": nmpc_config.v_max_mps,
-        "omega_max_radps": getattr(nmpc.config, "omega_cmd_max_radps", nmpc_config.omega_max_radps),
-    }
     if out_dir is not None:
         prepare_out_dir(out_dir)
     log_path = out_dir / "log.csv" if out_dir is not None else None
+    reference = sc.reference_object()
+    recorder = _recorder(sc, reference, out_dir, live_port)
+    finished = False
     try:
         result = run_episode(
-            nmpc,
-            sc.reference_object(),
-            episode_config,
-            log_path,
-            robot_radius_m=nmpc_config.robot_radius_m,
+            nmpc, reference, episode_config, log_path, robot_radius_m=robot_radius_m, observer=recorder
         )
+        finished = True
     except (RunInterrupted, KeyboardInterrupt) as exc:  # before the first control step
         signum = interrupts.signum_of(exc)
         if out_dir is not None:
             name = signal.Signals(signum).name
             write_summary(out_dir, {**header, "outcome": "interrupted", "interrupted_by": name, "steps": 0})
         raise RunInterrupted(signum) from None
+    finally:  # a recording cut short is still a valid file, and says so
+        if recorder is not None and not finished:
+            with interrupts.deferred():
+                recorder.close("ended early", "(interrupted or failed before its first control step)")
     summary: dict[str, object] = {**header, **result.metrics.as_dict()}
+    if recorder is not None:
+        with interrupts.deferred():
+            recorder.close(str(summary["outcome"]), f"after {summary['steps']} steps")
     if out_dir is not None:
         with interrupts.deferred():
             result.trace.save(out_dir / "trace.npz")
@@ -119,6 +154,28 @@ def run_scenario(
     if result.interrupted_by is not None:
         raise RunInterrupted(result.interrupted_by)
     return summary
+
+
+def _recorder(
+    sc: Scenario, reference: Reference, out_dir: Path | None, live_port: int | None
+) -> FoxgloveRecorder | None:
+    """The run's Foxglove recorder (run.mcap in out_dir), or None when nothing is written."""
+    if out_dir is None and live_port is None:
+        return None
+    import tempfile
+
+    specs = sc.obstacle_specs()
+    path = out_dir / MCAP_NAME if out_dir is not None else Path(tempfile.mkdtemp()) / MCAP_NAME
+    return FoxgloveRecorder(
+        path,
+        reference,
+        [o.radius_m for o in specs],
+        [o.height_m for o in specs],
+        load_geometry().footprint_half_extents_m,
+        sc.tau_s,
+        sc.duration_s,
+        live_port,
+    )
 
 
 def run_scenario_kinematic(

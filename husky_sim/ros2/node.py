@@ -1,0 +1,389 @@
+"""`husky-sim serve`: one of our controllers as a ROS 2-compatible node over DDS (no ROS install).
+
+In: odometry (nav_msgs/Odometry, sensor-data QoS), a goal (geometry_msgs/PoseStamped on
+/goal_pose; until one arrives the scenario's reference is tracked), obstacles
+(visualization_msgs/MarkerArray of cylinders: centre, diameter = scale.x; velocities estimated
+from successive markers of the same id) and, with use_sim_time, /clock. Goals and markers must
+be in the odom frame (or have no frame): there is no tf here, so others are refused and counted.
+Out: geometry_msgs/Twist on /cmd_vel once per tau and the plan as nav_msgs/Path.
+
+A control step runs on the first odometry sample at least tau (of odometry stamps) after the
+previous step's. Safety, each event counted and logged as a row of `serve.csv`:
+- `stale`: no odometry newer than 2 tau on the node's clock -> zero command, once per tau;
+- `brake`: the controller fell back to braking (or raised: also counted as `error`) -> zero
+  command;
+- `overrun`: the solve took longer than tau (wall time: what the robot's computer takes) -> its
+  result is dropped and a zero command sent, never the plan of an older step;
+- `shutdown`: a zero command as the node stops (Ctrl-C, SIGTERM, end of --duration).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import csv
+import json
+import math
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+from cyclonedds.core import InstanceState, ReadCondition, SampleState, ViewState, WaitSet
+from cyclonedds.util import duration
+
+from controllers import Controller, ControlResult, Obstacle, Reference, SetPoint
+from husky_sim import interrupts
+from husky_sim.ros2 import messages as msg
+from husky_sim.ros2.transport import (
+    CLOCK_QOS,
+    DEFAULT_QOS,
+    SENSOR_DATA_QOS,
+    Participant,
+    Ros2Settings,
+    take_all,
+    take_latest,
+)
+
+#: Odometry older than this many control periods (on the node's clock) stops the robot.
+STALE_ODOMETRY_PERIODS = 2.0
+
+SERVE_LOG_COLUMNS = (
+    "tick",
+    "clock_s",
+    "odom_stamp_s",
+    "odom_age_s",
+    "t_ref_s",
+    "x_m",
+    "y_m",
+    "yaw_rad",
+    "obstacles",
+    "v_cmd_mps",
+    "omega_cmd_radps",
+    "event",
+    "status",
+    "fallback",
+    "recovered_by",
+    "soft_constraint",
+    "guided",
+    "safety_active",
+    "solve_ms",
+    "odom_latency_ms",
+)
+EVENTS = ("command", "stale", "brake", "overrun", "shutdown")  # one per serve.csv row
+#: Counted apart (the same step is also a `brake` row): the controller raised instead of returning.
+ERROR = "error"
+
+
+class ObstacleTracker:
+    """Obstacles from MarkerArrays of cylinders; velocity (m/s) from successive poses of each id."""
+
+    def __init__(self) -> None:
+        # (ns, id) -> [stamp s, x m, y m, radius m, vx m/s, vy m/s]
+        self._tracks: dict[tuple[str, int], list[float]] = {}
+
+    def update(self, array: object, frame_id: str) -> int:
+        """Take a MarkerArray; return how many markers were refused for another frame than
+        frame_id (there is no tf here to move them into it)."""
+        refused = 0
+        for marker in array.markers:
+            key = (marker.ns, marker.id)
+            if marker.header.frame_id not in ("", frame_id):
+                refused += 1
+            elif marker.action == msg.MARKER_DELETEALL:
+                self._tracks.clear()
+            elif marker.action == 2:  # DELETE
+                self._tracks.pop(key, None)
+            elif marker.type == msg.MARKER_CYLINDER:
+                stamp = msg.from_time(marker.header.stamp)
+                x, y = marker.pose.position.x, marker.pose.position.y
+                vx = vy = 0.0
+                old = self._tracks.get(key)
+                if old is not None:
+                    dt = stamp - old[0]
+                    vx, vy = ((x - old[1]) / dt, (y - old[2]) / dt) if dt > 1e-6 else (old[4], old[5])
+                self._tracks[key] = [stamp, x, y, 0.5 * marker.scale.x, vx, vy]
+        return refused
+
+    def obstacles_at(self, t_s: float) -> list[Obstacle]:
+        """Each obstacle predicted at constant velocity to time t_s (s, the odometry's stamp)."""
+        out = []
+        for stamp, x, y, r, vx, vy in self._tracks.values():
+            dt = t_s - stamp
+            out.append(Obstacle(x + vx * dt, y + vy * dt, r, vx, vy))
+        return out
+
+
+def timing_stats(values: Sequence[float]) -> dict[str, float | None]:
+    """Median, p99 and max of times (ms); None for each when there are none."""
+    if not values:
+        return {"median": None, "p99": None, "max": None}
+    a = np.asarray(values, dtype=float)
+    return {"median": float(np.median(a)), "p99": float(np.percentile(a, 99)), "max": float(a.max())}
+
+
+@dataclass
+class ServeStats:
+    """Counts and timings of a serve session (written as serve_summary.json)."""
+
+    ticks: int = 0
+    events: dict[str, int] = field(default_factory=lambda: dict.fromkeys((*EVENTS, ERROR), 0))
+    goals_received: int = 0
+    rejected: dict[str, int] = field(default_factory=lambda: {"goals": 0, "markers": 0})  # other frames
+    # the controller's own counts, under the names of a run's summary (husky_sim.metrics)
+    controller_counts: dict[str, int] = field(
+        default_factory=lambda: dict.fromkeys(
+            ("fallbacks", "recoveries", "soft_constraint_steps", "guided_steps", "safety_active_steps"), 0
+        )
+    )
+    solve_ms: list[float] = field(default_factory=list)
+    odom_latency_ms: list[float] = field(default_factory=list)
+
+    def as_dict(self) -> dict[str, object]:
+        return {
+            "ticks": self.ticks,
+            **{f"{k}_events": v for k, v in self.events.items()},
+            "goals_received": self.goals_received,
+            **{f"{k}_rejected_other_frame": v for k, v in self.rejected.items()},
+            **self.controller_counts,
+            "solve_ms": timing_stats(self.solve_ms),
+            "odometry_latency_ms": timing_stats(self.odom_latency_ms),
+        }
+
+
+class ControllerNode:
+    """A controller (controllers.Controller) behind ROS 2 topics."""
+
+    def __init__(
+        self,
+        controller: Controller,
+        reference: Reference,
+        tau_s: float,
+        settings: Ros2Settings,
+        out_dir: Path | None = None,
+    ) -> None:
+        self.controller, self.reference, self.tau_s, self.settings = controller, reference, tau_s, settings
+        self.stats = ServeStats()
+        self._dds = Participant(settings)
+        s = settings
+        self._odom = self._dds.reader(s.odometry_topic, msg.ODOMETRY, SENSOR_DATA_QOS)
+        self._goal = self._dds.reader(s.goal_topic, msg.POSE_STAMPED, DEFAULT_QOS)
+        self._markers = self._dds.reader(s.obstacles_topic, msg.MARKER_ARRAY, DEFAULT_QOS)
+        self._clock = self._dds.reader(s.clock_topic, msg.CLOCK, CLOCK_QOS) if s.use_sim_time else None
+        self.cmd_vel = self._dds.writer(s.cmd_vel_topic, msg.TWIST, DEFAULT_QOS)
+        self._plan = self._dds.writer(s.plan_topic, msg.PATH, DEFAULT_QOS)
+        self._waitset = WaitSet(self._dds.participant)
+        mask = SampleState.NotRead | ViewState.Any | InstanceState.Any
+        for reader in (self._odom, self._goal, self._markers, self._clock):
+            if reader is not None:
+                self._waitset.attach(ReadCondition(reader, mask))
+        self._tracker = ObstacleTracker()
+        self._sim_now: float | None = None
+        self._last_odom_stamp: float | None = None
+        self._t0: float | None = 0.0 if s.use_sim_time else None
+        self._next_step_stamp = -math.inf
+        self._next_stale_at = -math.inf
+        self.out_dir = out_dir
+        self._log_file = self._writer = None
+        if out_dir is not None:
+            out_dir.mkdir(parents=True, exist_ok=True)
+            self._log_file = (out_dir / "serve.csv").open("w", newline="")
+            self._writer = csv.DictWriter(self._log_file, fieldnames=SERVE_LOG_COLUMNS)
+            self._writer.writeheader()
+            self._log_file.flush()
+        controller.reset()
+
+    # -- clock ---------------------------------------------------------------------------------
+    def now(self) -> float | None:
+        """The node's clock (s): /clock with use_sim_time, else ROS time (the system clock)."""
+        return self._sim_now if self.settings.use_sim_time else time.time()
+
+    # -- loop ----------------------------------------------------------------------------------
+    def spin(self, stop: Callable[[], bool] = lambda: False, duration_s: float | None = None) -> None:
+        """Serve until `stop()` is true, duration_s of wall time has passed, or a signal arrives;
+        then send a zero command. Never raises for a solver failure."""
+        end = math.inf if duration_s is None else time.monotonic() + duration_s
+        try:
+            while not stop() and time.monotonic() < end:
+                interrupts.check()
+                self._waitset.wait(duration(milliseconds=max(1, int(250 * self.tau_s))))
+                self.poll()
+        finally:
+            with interrupts.deferred():
+                self._publish_twist(np.zeros(2))
+                self._log_row("shutdown", "shutdown", np.zeros(2))
+                self._flush_acks()
+                self.close()
+
+    def poll(self) -> None:
+        """Read everything waiting and act on it once."""
+        goal = take_latest(self._goal)
+        if goal is not None:
+            if goal.header.frame_id in ("", self.settings.odom_frame):
+                p = goal.pose
+                self.reference = SetPoint(p.position.x, p.position.y, msg.quaternion_yaw(p.orientation))
+                self.stats.goals_received += 1
+            else:  # no tf here: a goal in another frame would be driven to in the wrong place
+                self.stats.rejected["goals"] += 1
+        for array in take_all(self._markers):
+            self.stats.rejected["markers"] += self._tracker.update(array, self.settings.odom_frame)
+        if self._clock is not None:
+            clock = take_latest(self._clock)
+            if clock is not None:
+                self._sim_now = msg.from_time(clock.clock)
+        odom = take_latest(self._odom)
+        if odom is not None:
+            stamp = msg.from_time(odom.header.stamp)
+            self._last_odom_stamp = stamp
+            latency_ms = (time.time_ns() - odom.sample_info.source_timestamp) / 1e6
+            self.stats.odom_latency_ms.append(latency_ms)
+            if stamp >= self._next_step_stamp - 1e-3 * self.tau_s:
+                self._next_step_stamp = stamp + self.tau_s
+                self._control_step(odom, stamp, latency_ms)
+        self._watchdog()
+
+    def _watchdog(self) -> None:
+        now = self.now()
+        if now is None:
+            return
+        age = math.inf if self._last_odom_stamp is None else now - self._last_odom_stamp
+        if age > STALE_ODOMETRY_PERIODS * self.tau_s and now >= self._next_stale_at:
+            self._next_stale_at = now + self.tau_s
+            self._publish_twist(np.zeros(2))
+            self._log_row("stale", f"odometry age {age:.3g} s", np.zeros(2), odom_age_s=age)
+
+    def _control_step(self, odom: object, stamp: float, latency_ms: float) -> None:
+        now = self.now()
+        if now is not None and now - stamp > STALE_ODOMETRY_PERIODS * self.tau_s:
+            return  # arrived too late to act on: the watchdog stops the robot
+        p = odom.pose.pose
+        state = np.array([p.position.x, p.position.y, msg.quaternion_yaw(p.orientation)])
+        if self._t0 is None:
+            self._t0 = stamp  # wall clock: the reference starts with the first odometry
+        t_ref = stamp - self._t0
+        obstacles = self._tracker.obstacles_at(stamp)
+        start = time.perf_counter()
+        try:
+            result = self.controller.solve(state, self.reference, obstacles, t_ref)
+        except Exception as exc:  # noqa: BLE001 - a node must stop the robot, not die, on any failure
+            result = ControlResult.brake(1, 0, 0, time.perf_counter() - start, f"error: {exc}"[:200])
+            self.stats.events[ERROR] += 1
+        solve_s = time.perf_counter() - start
+        self.stats.solve_ms.append(1000.0 * solve_s)
+        if solve_s > self.tau_s:
+            event, command = "overrun", np.zeros(2)
+        elif result.fallback == "brake":
+            event, command = "brake", np.zeros(2)
+        else:
+            event, command = "command", np.asarray(result.control, dtype=float)
+            self._publish_plan(result, stamp)
+        self._publish_twist(command)
+        counts = self.stats.controller_counts
+        counts["fallbacks"] += result.is_fallback
+        counts["recoveries"] += bool(result.recovered_by)
+        counts["soft_constraint_steps"] += result.soft_constraint
+        counts["guided_steps"] += result.guided
+        counts["safety_active_steps"] += result.safety_active > 0
+        self._log_row(
+            event,
+            result.status,
+            command,
+            odom_stamp_s=stamp,
+            odom_age_s=math.nan if now is None else now - stamp,
+            t_ref_s=t_ref,
+            x_m=float(state[0]),
+            y_m=float(state[1]),
+            yaw_rad=float(state[2]),
+            obstacles=len(obstacles),
+            fallback=result.fallback,
+            recovered_by=result.recovered_by,
+            soft_constraint=int(result.soft_constraint),
+            guided=int(result.guided),
+            safety_active=int(result.safety_active),
+            solve_ms=1000.0 * solve_s,
+            odom_latency_ms=latency_ms,
+        )
+
+    # -- output --------------------------------------------------------------------------------
+    def _publish_twist(self, command: np.ndarray) -> None:
+        twist = msg.make(msg.TWIST)
+        twist.linear.x, twist.angular.z = float(command[0]), float(command[1])
+        self.cmd_vel.write(twist)
+
+    def _publish_plan(self, result: ControlResult, stamp: float) -> None:
+        frame = self.settings.odom_frame
+        poses = [
+            msg.make(msg.POSE_STAMPED, header=msg.header(stamp + k * self.tau_s, frame), pose=msg.pose(*xs))
+            for k, xs in enumerate(result.predicted_states)
+            if np.all(np.isfinite(xs))
+        ]
+        self._plan.write(msg.make(msg.PATH, header=msg.header(stamp, frame), poses=poses))
+
+    def _log_row(self, event: str, status: str, command: np.ndarray, **fields: object) -> None:
+        """Count an event and write its row of serve.csv (columns not given are left empty)."""
+        self.stats.ticks += 1
+        self.stats.events[event] += 1  # ERROR is counted where it happens
+        if self._writer is None:
+            return
+        row = {k: "" for k in SERVE_LOG_COLUMNS}
+        row.update(tick=self.stats.ticks - 1, clock_s=self.now(), event=event, status=status)
+        row.update(v_cmd_mps=float(command[0]), omega_cmd_radps=float(command[1]), **fields)
+        with interrupts.deferred():
+            self._writer.writerow({k: (f"{v:.9g}" if isinstance(v, float) else v) for k, v in row.items()})
+            self._log_file.flush()
+
+    def _flush_acks(self) -> None:
+        """Give the last (zero) command time to reach reliable subscribers before leaving."""
+        with contextlib.suppress(Exception):  # best effort: a vanished subscriber is not an error here
+            self.cmd_vel.wait_for_acks(duration(milliseconds=500))
+
+    def close(self) -> None:
+        if self._log_file is not None:
+            self._log_file.close()
+            self._log_file = None
+        if self.out_dir is not None:
+            summary = {"settings": self.settings.__dict__, "tau_s": self.tau_s, **self.stats.as_dict()}
+            tmp = self.out_dir / "serve_summary.json.tmp"
+            tmp.write_text(json.dumps(summary, indent=2, default=str) + "\n")
+            tmp.replace(self.out_dir / "serve_summary.json")
+
+
+def serve(
+    controller: Controller,
+    reference: Reference,
+    tau_s: float,
+    settings: Ros2Settings,
+    out_dir: Path | None = None,
+    duration_s: float | None = None,
+    ready: Callable[[], None] | None = None,
+) -> ServeStats:
+    """Run a node until interrupted or duration_s (wall) has passed; return its counts."""
+    node = ControllerNode(controller, reference, tau_s, settings, out_dir)
+    if ready is not None:
+        ready()
+    node.spin(duration_s=duration_s)
+    return node.stats
+
+
+def obstacles_to_markers(
+    obstacles: Sequence[Obstacle], stamp_s: float, frame_id: str, height_m: float = 1.0
+) -> object:
+    """A MarkerArray of cylinders (one per obstacle, id = index, action ADD, which replaces the
+    marker of the same id) that RViz and Foxglove draw and ObstacleTracker reads back."""
+    markers = []
+    for i, o in enumerate(obstacles):
+        m = msg.make(
+            msg.MARKER,
+            header=msg.header(stamp_s, frame_id),
+            ns="obstacles",
+            id=i,
+            type=msg.MARKER_CYLINDER,
+            action=msg.MARKER_ADD,
+            pose=msg.pose(o.x_m, o.y_m, 0.0),
+        )
+        m.pose.position.z = 0.5 * height_m
+        m.scale.x = m.scale.y = 2.0 * o.radius_m
+        m.scale.z = height_m
+        m.color.r, m.color.g, m.color.b, m.color.a = 0.8, 0.2, 0.2, 0.8
+        markers.append(m)
+    return msg.make(msg.MARKER_ARRAY, markers=markers)

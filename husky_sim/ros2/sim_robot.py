@@ -1,0 +1,166 @@
+"""The simulated Husky as a DDS "robot": the controller side of the episode loop, over DDS.
+
+`DdsRobot` stands where a controller stands in `husky_sim.episode.run_episode` (it implements
+controllers.Controller), so the rehearsal runs the very loop, sensing, drive, collision checks
+and judging of `husky-sim run`. At each control step it publishes the sensed obstacles (MarkerArray),
+the sensed pose (Odometry, stamped with sim time) and /clock, in that order, then waits for the node's
+next /cmd_vel (and takes the /plan stamped with this step). Sim time stands still while it waits,
+so the loop is in lock-step with the node whatever the transport's latency, which is measured
+(publication to reception, on this machine's clock) and reported.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Sequence
+
+import numpy as np
+from cyclonedds.core import InstanceState, ReadCondition, SampleState, ViewState, WaitSet
+from cyclonedds.util import duration
+
+from controllers import ControlResult, Obstacle, Reference, SetPoint
+from controllers.model import wrap_angle
+from husky_sim import interrupts
+from husky_sim.ros2 import messages as msg
+from husky_sim.ros2.node import obstacles_to_markers
+from husky_sim.ros2.transport import (
+    CLOCK_QOS,
+    DEFAULT_QOS,
+    SENSOR_DATA_QOS,
+    Participant,
+    Ros2Settings,
+    take_all,
+    take_latest,
+)
+
+
+class NodeNotFound(RuntimeError):
+    """The node did not appear on the DDS domain in time."""
+
+
+class DdsRobot:
+    """controllers.Controller whose decisions come from a `husky-sim serve` node over DDS."""
+
+    def __init__(
+        self, settings: Ros2Settings, tau_s: float, horizon: int, reply_timeout_s: float = 10.0
+    ) -> None:
+        self.settings, self.tau_s, self.horizon, self.reply_timeout_s = (
+            settings,
+            tau_s,
+            horizon,
+            reply_timeout_s,
+        )
+        self._dds = Participant(settings)
+        s = settings
+        self._odom = self._dds.writer(s.odometry_topic, msg.ODOMETRY, SENSOR_DATA_QOS)
+        self._markers = self._dds.writer(s.obstacles_topic, msg.MARKER_ARRAY, DEFAULT_QOS)
+        self._clock = self._dds.writer(s.clock_topic, msg.CLOCK, CLOCK_QOS)
+        self._goal = self._dds.writer(s.goal_topic, msg.POSE_STAMPED, DEFAULT_QOS)
+        self._cmd = self._dds.reader(s.cmd_vel_topic, msg.TWIST, DEFAULT_QOS)
+        self._plan = self._dds.reader(s.plan_topic, msg.PATH, DEFAULT_QOS)
+        self._waitset = WaitSet(self._dds.participant)
+        self._waitset.attach(
+            ReadCondition(self._cmd, SampleState.NotRead | ViewState.Any | InstanceState.Any)
+        )
+        self.cmd_latency_ms: list[float] = []
+        self.reply_timeouts = 0
+        self._previous: tuple[float, np.ndarray] | None = None
+        self._goal_sent = False
+
+    def wait_for_node(self, timeout_s: float) -> None:
+        """Block until the node's readers and writers are matched with ours (DDS discovery)."""
+        end = time.monotonic() + timeout_s
+        entities = (self._odom, self._markers, self._goal, self._clock)
+        while time.monotonic() < end:
+            interrupts.check()
+            if all(w.get_matched_subscriptions() for w in entities) and self._cmd.get_matched_publications():
+                return
+            time.sleep(0.02)
+        raise NodeNotFound(
+            f"no husky-sim serve node answered on DDS domain {self.settings.resolved_domain_id()} "
+            f"within {timeout_s:g} s"
+        )
+
+    def reset(self) -> None:
+        self._previous = None
+        self._goal_sent = False
+
+    def solve(
+        self, state: np.ndarray, reference: Reference, obstacles: Sequence[Obstacle], t: float
+    ) -> ControlResult:
+        start = time.perf_counter()
+        frame = self.settings.odom_frame
+        if isinstance(reference, SetPoint) and not self._goal_sent:  # as RViz's "2D Goal Pose" does
+            goal = msg.make(
+                msg.POSE_STAMPED,
+                header=msg.header(t, frame),
+                pose=msg.pose(reference.x_m, reference.y_m, reference.theta_rad),
+            )
+            self._goal.write(goal)
+            self._goal.wait_for_acks(duration(seconds=1))
+            self._goal_sent = True
+        take_all(self._cmd)  # nothing from before this step may pass for its answer
+        # obstacles first, and acknowledged, so the node never plans step k with step k-1's
+        # obstacles; the clock last, so the node never sees time t before the odometry stamped t
+        self._markers.write(obstacles_to_markers(obstacles, t, frame))
+        self._markers.wait_for_acks(duration(seconds=self.reply_timeout_s))
+        self._odom.write(self._odometry(state, t))
+        self._clock.write(msg.make(msg.CLOCK, clock=msg.to_time(t)))
+        twist = self._await_command()
+        path = take_latest(self._plan)
+        plan = np.full((self.horizon + 1, 3), np.nan)
+        if path is not None and abs(msg.from_time(path.header.stamp) - t) < 1e-6:
+            poses = [
+                (p.pose.position.x, p.pose.position.y, msg.quaternion_yaw(p.pose.orientation))
+                for p in path.poses
+            ]
+            plan[: min(len(poses), self.horizon + 1)] = poses[: self.horizon + 1]
+        replied = twist is not None
+        control = np.array([twist.linear.x, twist.angular.z]) if replied else np.zeros(2)
+        return ControlResult(
+            control=control,
+            predicted_states=plan,
+            predicted_controls=np.zeros((self.horizon, 2)),
+            clf_slack=np.zeros(self.horizon),
+            decay_slack=np.ones(self.horizon),
+            predicted_barrier=np.zeros((0, self.horizon + 1)),
+            safety_active=0,
+            status="dds" if replied else f"no /cmd_vel within {self.reply_timeout_s:g} s",
+            success=replied,
+            fallback="none" if replied else "brake",
+            iterations=-1,
+            solve_time_s=time.perf_counter() - start,
+            obstacles_considered=len(obstacles),
+            obstacles_ignored=0,
+        )
+
+    def _odometry(self, state: np.ndarray, t: float) -> object:
+        """Odometry of the sensed pose; its twist is the body velocity between this pose and the
+        previous one (what a state estimator would give without wheel data)."""
+        odom = msg.make(
+            msg.ODOMETRY,
+            header=msg.header(t, self.settings.odom_frame),
+            child_frame_id=self.settings.base_frame,
+            pose=msg.make("geometry_msgs/msg/PoseWithCovariance", pose=msg.pose(*state)),
+        )
+        if self._previous is not None and t > self._previous[0]:
+            dt = t - self._previous[0]
+            delta = state[:2] - self._previous[1][:2]
+            odom.twist.twist.linear.x = float(np.dot(delta, [math.cos(state[2]), math.sin(state[2])]) / dt)
+            odom.twist.twist.angular.z = float(wrap_angle(state[2] - self._previous[1][2]) / dt)
+        self._previous = (t, np.array(state, dtype=float))
+        return odom
+
+    def _await_command(self) -> object | None:
+        end = time.monotonic() + self.reply_timeout_s
+        while time.monotonic() < end:
+            interrupts.check()
+            samples = take_all(self._cmd)
+            if samples:
+                twist = samples[-1]
+                self.cmd_latency_ms.append((time.time_ns() - twist.sample_info.source_timestamp) / 1e6)
+                return twist
+            self._waitset.wait(duration(milliseconds=20))
+        self.reply_timeouts += 1
+        return None
