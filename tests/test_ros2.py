@@ -134,6 +134,8 @@ def test_serve_rejects_bad_input_in_one_line(capsys: pytest.CaptureFixture[str],
     assert main(["serve", "husky_point_stabilisation", "--cmd-vel-topic", "cmd_vel"]) == 2
     err = capsys.readouterr().err.strip()
     assert "cmd_vel_topic: expected an absolute ROS 2 topic name" in err and len(err.splitlines()) == 1
+    assert main(["rehearse", "husky_point_stabilisation", "--reply-timeout", "0"]) == 2
+    assert "--reply-timeout: expected a number in [0.01, 600], got 0" in capsys.readouterr().err
     monkeypatch.setenv("ROS_DOMAIN_ID", "999")
     assert main(["serve", "husky_point_stabilisation"]) == 2
     assert "ROS_DOMAIN_ID: expected an integer in [0, 232], got 999" in capsys.readouterr().err
