@@ -3,13 +3,16 @@
 Each finding is pass / warn / fail with the numbers behind it:
 
 - robot radius: the controller's circle against the URDF footprint (0.570 m) and the spec
-  sheet's half-diagonal (bumpers included); a circle smaller than the body is a FAIL.
+  sheet's half-diagonal (bumpers included); a circle smaller than the body is a FAIL. For
+  husky-cbf: its discs over the footprint and their margin against the sensing noise.
 - velocity limits: the NMPC's v / omega bounds against the Husky's published limits
   (husky_sim.husky_specs) and the scenario's drive; a bound the robot cannot reach is a FAIL.
-- acceleration: the NMPC has no acceleration constraint, so one control step may ask for any
-  change within the bounds; the drive's rate limit then makes the robot lag its plan.
+- acceleration: the paper's NMPC has no acceleration constraint, so one control step may ask for
+  any change within the bounds; the drive's rate limit then makes the robot lag its plan.
+  husky-cbf plans its accelerations within its own bounds, checked against the drive's.
 - stopping distance at v_max (reaction over tau and the latency, plus braking at the drive's
-  deceleration) against the radius margin the plan keeps.
+  deceleration) against the radius margin the plan keeps (husky-cbf plans its braking: only the
+  latency is beyond its plan, against its disc margin).
 - timing: tau against the p99 of solve times measured here on the scenario's kinematic closed
   loop; a plan that cannot be solved within tau is a FAIL.
 - obstacles and sensing: radii, motion and prediction model, noise and latency, stated.
@@ -114,8 +117,11 @@ def check_robot_radius(scenario: Scenario, t: AuditThresholds) -> Finding:
     return Finding("robot radius", "pass", f"{text}, >= needed {needed:.3f} m", values)
 
 
-def check_velocity_limits(scenario: Scenario) -> Finding:
+def check_velocity_limits(scenario: Scenario, omega_max_radps: float | None = None) -> Finding:
+    """The plan's v and omega bounds against the robot's; `omega_max_radps` is the controller's
+    own yaw-rate bound where it is not the scenario's (husky-cbf commands up to the drive's)."""
     c, drive = scenario.controller, drive_config(scenario)
+    omega_max = c.omega_max_radps if omega_max_radps is None else omega_max_radps
     v_pub = specs.MAX_SPEED_MPS  # [MANUAL] and [CONTROL] agree: 1.0 m/s
     w_pub = specs.ANGULAR_MAX_VELOCITY_RADPS  # [CONTROL] ROS 1: 2.0 rad/s
     w_ros2 = specs.ROS2_DIFF_DRIVE.angular_max_velocity_radps
@@ -124,18 +130,18 @@ def check_velocity_limits(scenario: Scenario) -> Finding:
     values = {
         "v_min_mps": c.v_min_mps,
         "v_max_mps": c.v_max_mps,
-        "omega_max_radps": c.omega_max_radps,
+        "omega_max_radps": omega_max,
         "published_v_mps": v_pub,
         "published_omega_radps": w_pub,
         "drive_v_mps": drive.max_linear_mps,
         "drive_omega_radps": drive.max_angular_radps,
     }
     text = (
-        f"NMPC v in [{c.v_min_mps:g}, {c.v_max_mps:g}] m/s, |omega| <= {c.omega_max_radps:.3f} rad/s; "
+        f"NMPC v in [{c.v_min_mps:g}, {c.v_max_mps:g}] m/s, |omega| <= {omega_max:.3f} rad/s; "
         f"Husky {v_pub:g} m/s, {w_pub:g} rad/s (ROS 1; ROS 2: {w_ros2:g} rad/s); "
         f"drive {drive.max_linear_mps:g} m/s, {drive.max_angular_radps:g} rad/s"
     )
-    if v_abs > v_limit + 1e-9 or c.omega_max_radps > w_limit + 1e-9:
+    if v_abs > v_limit + 1e-9 or omega_max > w_limit + 1e-9:
         return Finding(
             "velocity limits", "fail", f"{text}: the plan commands speeds the robot cannot reach", values
         )
@@ -143,7 +149,7 @@ def check_velocity_limits(scenario: Scenario) -> Finding:
         return Finding(
             "velocity limits", "warn", f"{text}: the simulated drive exceeds the real robot", values
         )
-    if c.omega_max_radps > w_ros2 + 1e-9:
+    if omega_max > w_ros2 + 1e-9:
         return Finding("velocity limits", "warn", f"{text}: above the ROS 2 driver's angular limit", values)
     return Finding("velocity limits", "pass", text, values)
 
@@ -187,6 +193,98 @@ def check_acceleration(scenario: Scenario) -> Finding:
             values,
         )
     return Finding("acceleration", "pass", text, values)
+
+
+# -- husky-cbf: a body of discs, accelerations and braking in its model ----------------------------
+def check_body_discs(scenario: Scenario, t: AuditThresholds) -> Finding:
+    """husky-cbf: the discs that cover the URDF footprint and their margin, against the noise."""
+    from controllers.husky_cbf.footprint import disc_cover
+
+    cfg = scenario.husky_cbf_config()
+    centres, radius = disc_cover(cfg.footprint, cfg.disc_excess_m)
+    s = scenario.sensing
+    needed = max(t.min_radius_margin_m, t.noise_sigmas * math.hypot(s.pose_xy_std_m, s.obstacle_xy_std_m))
+    f = cfg.footprint
+    values = {
+        "discs": len(centres),
+        "disc_radius_m": radius,
+        "footprint_m": [2 * f.half_length_m, 2 * f.half_width_m],
+        "margin_m": cfg.margin_m,
+        "needed_margin_m": needed,
+    }
+    text = (
+        f"husky-cbf: {len(centres)} discs of {radius:.3f} m along the body cover the URDF "
+        f"footprint {2 * f.half_length_m:.3f} x {2 * f.half_width_m:.3f} m, each kept "
+        f"{cfg.margin_m:.3f} m off obstacles"
+    )
+    if cfg.margin_m < needed:
+        return Finding(
+            "robot radius",
+            "warn",
+            f"{text}: below the {needed:.3f} m margin (max of {t.min_radius_margin_m:.3f} m and "
+            f"{t.noise_sigmas:g} sigma of pose + obstacle noise)",
+            values,
+        )
+    return Finding("robot radius", "pass", f"{text}, >= needed {needed:.3f} m", values)
+
+
+def check_planned_acceleration(scenario: Scenario) -> Finding:
+    """husky-cbf: its plans' accelerations are bounded in the model; against the drive's."""
+    resp, drive = scenario.husky_cbf_config().response, drive_config(scenario)
+    a_pub, alpha_pub = specs.LINEAR_MAX_ACCELERATION_MPS2, specs.ANGULAR_MAX_ACCELERATION_RADPS2
+    values = {
+        "planned_linear_accel_mps2": resp.max_linear_accel_mps2,
+        "planned_angular_accel_radps2": resp.max_angular_accel_radps2,
+        "drive_linear_accel_mps2": drive.max_linear_accel_mps2,
+        "drive_angular_accel_radps2": drive.max_angular_accel_radps2,
+        "published_linear_accel_mps2": a_pub,
+        "published_angular_accel_radps2": alpha_pub,
+    }
+    text = (
+        f"husky-cbf plans within {resp.max_linear_accel_mps2:g} m/s^2, {resp.max_angular_accel_radps2:g} "
+        f"rad/s^2 vs drive {drive.max_linear_accel_mps2:g} m/s^2, {drive.max_angular_accel_radps2:g} rad/s^2 "
+        f"(published ROS 1 {a_pub:g} / {alpha_pub:g})"
+    )
+    if (
+        resp.max_linear_accel_mps2 > drive.max_linear_accel_mps2 + 1e-9
+        or resp.max_angular_accel_radps2 > drive.max_angular_accel_radps2 + 1e-9
+    ):
+        return Finding(
+            "acceleration", "warn", f"{text}: it plans accelerations the drive cannot make", values
+        )
+    if drive.max_linear_accel_mps2 > a_pub + 1e-9 or drive.max_angular_accel_radps2 > alpha_pub + 1e-9:
+        return Finding(
+            "acceleration", "warn", f"{text}: the simulated drive accelerates harder than the robot", values
+        )
+    return Finding("acceleration", "pass", text, values)
+
+
+def check_planned_stopping(scenario: Scenario) -> Finding:
+    """husky-cbf: braking is in its plan (v^2 / 2a kept free at the horizon's end), so only the
+    latency, which it does not know of, can carry the robot past a planned stop."""
+    cfg = scenario.husky_cbf_config()
+    reaction, latency, braking = stopping_distance_m(scenario)
+    values = {
+        "reaction_m": reaction,
+        "latency_m": latency,
+        "braking_m": braking,
+        "stopping_m": reaction + latency + braking,
+        "unplanned_overrun_m": latency,
+        "margin_m": cfg.margin_m,
+    }
+    text = (
+        f"stop from v_max {scenario.controller.v_max_mps:g} m/s: {values['stopping_m']:.3f} m "
+        f"({reaction:.3f} m over tau + {latency:.3f} m latency + {braking:.3f} m braking, which "
+        f"husky-cbf plans); beyond the plan {latency:.3f} m vs disc margin {cfg.margin_m:.3f} m"
+    )
+    if latency > cfg.margin_m:
+        return Finding(
+            "stopping distance",
+            "warn",
+            f"{text}: the sensing latency carries the robot past a planned stop by more than its margin",
+            values,
+        )
+    return Finding("stopping distance", "pass", text, values)
 
 
 def stopping_distance_m(scenario: Scenario) -> tuple[float, float, float]:
@@ -337,10 +435,23 @@ def audit(
     scenario: Scenario,
     solve_times_s: Sequence[float],
     thresholds: AuditThresholds | None = None,
+    controller: str = "relax-cbf",
 ) -> list[Finding]:
     """Every finding for a scenario (its controller already set to the horizon under test), given
-    solve times measured for it (measure_solve_times)."""
+    solve times measured for it (measure_solve_times); husky-cbf's body, accelerations and
+    braking are its own (a body of discs, both in its model), the paper's controllers' the
+    scenario's circle and an unconstrained step."""
     t = thresholds or AuditThresholds()
+    if controller == "husky-cbf":
+        return [
+            check_body_discs(scenario, t),
+            check_velocity_limits(scenario, scenario.husky_cbf_config().omega_cmd_max_radps),
+            check_planned_acceleration(scenario),
+            check_planned_stopping(scenario),
+            check_timing(scenario.tau_s, solve_times_s, t),
+            check_obstacles(scenario),
+            check_sensing(scenario),
+        ]
     return [
         check_robot_radius(scenario, t),
         check_velocity_limits(scenario),

@@ -194,7 +194,7 @@ def run_check(
     seed = base.seed if options.seed is None else options.seed
     say(f"audit: timing {options.timing_solves} NMPC solves on the kinematic loop ...")
     solve_times = measure_solve_times(base, options.controller, solves=options.timing_solves)
-    findings = audit(base, solve_times, options.thresholds)
+    findings = audit(base, solve_times, options.thresholds, options.controller)
     for f in findings:
         say(f"  [{f.status}] {f.check}: {f.detail}")
 

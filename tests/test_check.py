@@ -93,6 +93,35 @@ def test_audit_flags_velocity_bounds_beyond_the_husky() -> None:
     assert by_check["acceleration"].values["implied_linear_accel_mps2"] == pytest.approx(3.0 / sc.tau_s)
 
 
+def test_audit_judges_husky_cbf_by_its_own_body_and_model() -> None:
+    """husky-cbf has no robot circle and plans its accelerations and braking: the audit checks its
+    discs, its bounds against the drive's, and only the latency beyond its plan."""
+    sc = load_scenario("husky_point_stabilisation")
+    fast = [0.004] * 10
+    by_check = {f.check: f for f in audit(sc, fast, controller="husky-cbf")}
+    paper = {f.check: f for f in audit(sc, fast)}
+    assert (
+        paper["acceleration"].status == "warn"
+        and "no acceleration constraint" in paper["acceleration"].detail
+    )
+    assert by_check["acceleration"].status == "pass"
+    assert (
+        by_check["acceleration"].values["planned_linear_accel_mps2"]
+        == sc.drive.config().max_linear_accel_mps2
+    )
+    body = by_check["robot radius"]
+    assert body.status == "pass" and body.values["discs"] == 3 and "discs" in body.detail
+    # husky-cbf commands up to the drive's 2 rad/s: more than Clearpath's ROS 2 driver allows
+    assert by_check["velocity limits"].values["omega_max_radps"] == 2.0
+    assert by_check["velocity limits"].status == "warn" and "ROS 2" in by_check["velocity limits"].detail
+    assert by_check["stopping distance"].status == "pass"
+    late = _modified(sc, sensing={"latency_steps": 1})  # 1 m/s x 0.2 s beyond the plan > 0.1 m margin
+    stopping = {f.check: f for f in audit(late, fast, controller="husky-cbf")}["stopping distance"]
+    assert stopping.status == "warn" and stopping.values["unplanned_overrun_m"] == pytest.approx(0.2)
+    noisy = _modified(sc, sensing={"pose_xy_std_m": 0.05, "obstacle_xy_std_m": 0.05})
+    assert {f.check: f for f in audit(noisy, fast, controller="husky-cbf")}["robot radius"].status == "warn"
+
+
 def test_timing_fails_when_tau_is_shorter_than_the_measured_solves() -> None:
     # a runnable scenario (2000 Hz physics, one physics step per control step) whose tau of 0.5 ms
     # is shorter than any IPOPT solve: the real measured p99 must exceed it
