@@ -6,7 +6,7 @@ from __future__ import annotations
 import math
 import resource
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -57,22 +57,60 @@ class SimBench:
 
 
 def drive_open_loop(
-    command: tuple[float, float], ground_friction: float, seconds: float = 6.0, physics_hz: float = 240.0
+    command: tuple[float, float],
+    ground_friction: float,
+    seconds: float = 6.0,
+    physics_hz: float = 240.0,
+    payload_kg: float = 0.0,
+    torque_scale: float = 1.0,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Hold a body command [v, omega] on flat ground; return the mean achieved [v, yaw rate] over
-    the second half of the run and the applied (limited) command of every physics step."""
+    """Hold a body command [v, omega] on flat ground (with a payload in kg and the wheel torque
+    limit scaled as `husky-sim check` does); return the mean achieved [v, yaw rate] over the
+    second half of the run and the applied (limited) command of every physics step."""
+    nominal = DriveConfig()
     track = simulate_commands(
         np.zeros(1),
         np.array([command], dtype=float),
         seconds,
         (0.0, 0.0, 0.0),
         world=WorldConfig(physics_hz=physics_hz, ground_friction=ground_friction),
+        drive=replace(nominal, wheel_torque_limit_nm=nominal.wheel_torque_limit_nm * torque_scale),
+        payload_kg=payload_kg,
     )
     steps = len(track.applied)
     return np.mean(track.body_velocity[steps // 2 + 1 :], axis=0), track.applied
 
 
 DRIVE_TABLE_COMMANDS = ((0.5, 0.0), (1.0, 0.0), (0.0, 0.5), (0.0, 1.0), (0.5, 0.5), (0.3, -0.3))
+
+#: Turning commands of the turn table: in place at the drive's limit, and an arc.
+TURN_TABLE_COMMANDS = ((0.0, 2.0), (0.5, 1.0))
+
+
+def turn_table(
+    payloads_kg: tuple[float, ...] = (0.0, 25.0, 50.0, 75.0),
+    torque_scales: tuple[float, ...] = (1.0, 0.85, 0.7),
+    frictions: tuple[float, ...] = (0.4, 0.7, 1.0),
+) -> str:
+    """Markdown table of the yaw rate achieved over the corners of `husky-sim check`'s payload,
+    torque and ground-friction ranges: where a loaded, derated skid-steer on grippy ground can no
+    longer turn, no controller can steer round an obstacle."""
+    head = " | ".join(f"omega for ({v:g}, {w:g}) | ratio" for v, w in TURN_TABLE_COMMANDS)
+    lines = [
+        f"| payload (kg) | torque scale | ground mu | {head} |",
+        "|---" * (3 + 2 * len(TURN_TABLE_COMMANDS)) + "|",
+    ]
+    for payload in payloads_kg:
+        for scale in torque_scales:
+            for mu in frictions:
+                cells = []
+                for command in TURN_TABLE_COMMANDS:
+                    (_, achieved), _ = drive_open_loop(
+                        command, mu, 4.0, payload_kg=payload, torque_scale=scale
+                    )
+                    cells.append(f"{achieved:.3f} | {achieved / command[1]:.2f}")
+                lines.append(f"| {payload:g} | {scale:g} | {mu:g} | {' | '.join(cells)} |")
+    return "\n".join(lines)
 
 
 def drive_table(frictions: tuple[float, ...] = (1.0, 0.5)) -> str:

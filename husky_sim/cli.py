@@ -96,6 +96,14 @@ def _cmd_bench_sim(args: argparse.Namespace) -> int:
 
         print("\nachieved versus commanded body velocity on flat ground (published drive limits)")
         print(drive_table())
+    if args.turn_table:
+        from husky_sim.bench_sim import turn_table
+
+        print(
+            "\nyaw rate achieved over check's payload x torque x friction corners "
+            "(4 s held, mean of the last 2 s)"
+        )
+        print(turn_table())
     return 0
 
 
@@ -534,6 +542,11 @@ def build_parser() -> argparse.ArgumentParser:
     )
     bench_sim.add_argument(
         "--drive-table", action="store_true", help="also print achieved vs commanded v and omega"
+    )
+    bench_sim.add_argument(
+        "--turn-table",
+        action="store_true",
+        help="also print the yaw rate achieved with payload, torque, friction",
     )
     bench_sim.set_defaults(func=_cmd_bench_sim)
     check = sub.add_parser("check", help="sim-to-real checks before a Husky trial: audit + robustness sweep")

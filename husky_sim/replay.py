@@ -103,13 +103,15 @@ def simulate_commands(
     world: WorldConfig | None = None,
     drive: DriveConfig | None = None,
     wheel_friction: WheelFriction | None = None,
+    payload_kg: float = 0.0,
 ) -> SimTrack:
-    """Drive a Husky on flat ground from `start` (x m, y m, yaw rad, at rest) for `duration_s`
-    (rounded up to whole physics steps) with the commands held from their times `cmd_t_s` (s)."""
+    """Drive a Husky (with `payload_kg` on its top plate) on flat ground from `start` (x m, y m,
+    yaw rad, at rest) for `duration_s` (rounded up to whole physics steps) with the commands held
+    from their times `cmd_t_s` (s)."""
     world = world or WorldConfig()
     drive = drive or DriveConfig()
     with World(world) as sim:
-        robot = HuskyRobot(sim.client, start, wheel_friction)
+        robot = HuskyRobot(sim.client, start, wheel_friction, payload_kg)
         skid = SkidSteerDrive(drive, robot.geometry.wheel_radius_m, robot.geometry.track_width_m)
         steps = max(math.ceil(duration_s * world.physics_hz - 1e-6), 0)
         t_s = np.arange(steps + 1) * sim.dt_s

@@ -61,3 +61,15 @@ def test_pose_is_base_link() -> None:
         robot = HuskyRobot(world.client, (1.0, -2.0, math.pi / 3))
         pose = robot.pose()
     assert pose == pytest.approx([1.0, -2.0, math.pi / 3], abs=1e-6)
+
+
+def test_a_loaded_derated_husky_on_grippy_ground_barely_turns() -> None:
+    """The corner of `husky-sim check`'s ranges (75 kg payload, 70 % torque, mu 1): the simulated
+    skid-steer turns at under 5 % of a commanded yaw rate, in place and on an arc, where the empty
+    robot on loose ground turns at over a third of it. No controller steers round an obstacle
+    there (bench-sim --turn-table prints the whole grid)."""
+    (_, empty), _ = drive_open_loop((0.0, 2.0), 0.4, 4.0)
+    assert empty / 2.0 > 0.35
+    for command in ((0.0, 2.0), (0.5, 1.0)):
+        (_, loaded), _ = drive_open_loop(command, 1.0, 4.0, payload_kg=75.0, torque_scale=0.7)
+        assert abs(loaded) / command[1] < 0.05
