@@ -105,12 +105,13 @@ class FoxgloveRecorder:
         live_port: int | None = None,
     ) -> None:
         self._context = foxglove.Context()
+        self._server = None
+        if live_port is not None:  # first: a port in use is the user's to change, before any file
+            try:
+                self._server = foxglove.start_server(name="husky-sim", port=live_port, context=self._context)
+            except RuntimeError as exc:
+                raise ValueError(f"--live: cannot serve Foxglove on 127.0.0.1:{live_port} ({exc})") from None
         self._writer = foxglove.open_mcap(path, allow_overwrite=True, context=self._context)
-        self._server = (
-            foxglove.start_server(name="husky-sim", port=live_port, context=self._context)
-            if live_port is not None
-            else None
-        )
         ctx = self._context
         self._tf = foxglove.channels.FrameTransformChannel("/tf", context=ctx)
         self._pose = foxglove.channels.PoseInFrameChannel("/robot/pose", context=ctx)

@@ -419,3 +419,15 @@ def test_live_server_advertises_the_run_channels(tmp_path: Path) -> None:
     assert received.startswith(b"HTTP/1.1 101")
     for channel in STEP_CHANNELS | {"/outcome"}:
         assert f'"{channel}"'.encode() in received
+
+
+def test_live_on_a_port_in_use_is_a_one_line_error(tmp_path: Path, capsys) -> None:
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen()
+        port = taken.getsockname()[1]
+        code = main(["run", "husky_point_stabilisation", "--live", str(port), "--out", str(tmp_path / "run")])
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and len(err.splitlines()) == 1
+    assert f"--live: cannot serve Foxglove on 127.0.0.1:{port}" in err
+    assert not (tmp_path / "run" / MCAP_NAME).exists()

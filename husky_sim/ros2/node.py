@@ -355,12 +355,9 @@ def serve(
     settings: Ros2Settings,
     out_dir: Path | None = None,
     duration_s: float | None = None,
-    ready: Callable[[], None] | None = None,
 ) -> ServeStats:
     """Run a node until interrupted or duration_s (wall) has passed; return its counts."""
     node = ControllerNode(controller, reference, tau_s, settings, out_dir)
-    if ready is not None:
-        ready()
     node.spin(duration_s=duration_s)
     return node.stats
 

@@ -66,7 +66,7 @@ def rehearse(
             node.kill()
             node.wait(timeout=10)
             output = node_output.read_text(errors="replace").strip().splitlines()
-            raise RuntimeError(f"{exc}; node said: {output[-1] if output else '(nothing)'}") from None
+            raise NodeNotFound(f"{exc}; node said: {output[-1] if output else '(nothing)'}") from None
         summary = run_scenario(sc, controller, out_dir=out_dir, implementation=robot, live_port=live_port)
     finally:
         node_summary = _stop_node(node, node_dir)

@@ -35,8 +35,9 @@ from husky_sim.ros2.transport import (
 )
 
 
-class NodeNotFound(RuntimeError):
-    """The node did not appear on the DDS domain in time."""
+class NodeNotFound(ConnectionError):
+    """The node did not appear on the DDS domain in time (an OSError: the command line reports
+    it in one line, exit 1)."""
 
 
 class DdsRobot:
