@@ -333,12 +333,14 @@ def _ros2_settings(args: argparse.Namespace, **fixed: object):
 def _add_ros2_arguments(parser: argparse.ArgumentParser) -> None:
     from dataclasses import fields
 
-    from husky_sim.ros2.transport import MAX_DOMAIN_ID, Ros2Settings
+    from husky_sim.ros2.transport import MAX_DOMAIN_ID, QOS_PROFILES, Ros2Settings
 
     for f in fields(Ros2Settings):
+        flag = "--" + f.name.replace("_", "-")
         if f.name.endswith(("_topic", "_frame")):
-            flag = "--" + f.name.replace("_", "-")
             parser.add_argument(flag, default=None, help=f"default {f.default}")
+        elif f.name.endswith("_qos"):
+            parser.add_argument(flag, choices=tuple(QOS_PROFILES), default=None, help=f"default {f.default}")
     parser.add_argument(
         "--domain-id",
         type=_number_in(int, 0, MAX_DOMAIN_ID),

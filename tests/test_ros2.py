@@ -118,6 +118,15 @@ def test_names_and_settings() -> None:
     assert msg.from_time(msg.to_time(12.3456789)) == pytest.approx(12.3456789, abs=1e-9)
     with pytest.raises(ValueError, match="cmd_vel_topic: expected an absolute ROS 2 topic name"):
         Ros2Settings(cmd_vel_topic="cmd_vel")
+    with pytest.raises(ValueError, match="odometry_topic: expected an absolute ROS 2 topic name"):
+        Ros2Settings(odometry_topic="/odometry//filtered")
+    with pytest.raises(
+        ValueError, match="odometry_qos: expected one of sensor_data, default, clock, got 'fast'"
+    ):
+        Ros2Settings(odometry_qos="fast")
+    assert Ros2Settings().qos("odometry") is SENSOR_DATA_QOS
+    assert Ros2Settings(odometry_qos="default").qos("odometry") is DEFAULT_QOS
+    assert Ros2Settings().qos("cmd_vel") is DEFAULT_QOS
     assert domain_id_from_env({}) == 0
     assert domain_id_from_env({"ROS_DOMAIN_ID": "42"}) == 42
     with pytest.raises(ValueError, match=r"ROS_DOMAIN_ID: expected an integer in \[0, 232\], got 300"):
@@ -147,10 +156,10 @@ class _Robot:
 
     def __init__(self, settings: Ros2Settings) -> None:
         self.dds = Participant(settings)
-        self.odom = self.dds.writer(settings.odometry_topic, msg.ODOMETRY, SENSOR_DATA_QOS)
-        self.goal = self.dds.writer(settings.goal_topic, msg.POSE_STAMPED, DEFAULT_QOS)
-        self.cmd = self.dds.reader(settings.cmd_vel_topic, msg.TWIST, DEFAULT_QOS)
-        self.plan = self.dds.reader(settings.plan_topic, msg.PATH, DEFAULT_QOS)
+        self.odom = self.dds.writer(settings.odometry_topic, msg.ODOMETRY, settings.qos("odometry"))
+        self.goal = self.dds.writer(settings.goal_topic, msg.POSE_STAMPED, settings.qos("goal"))
+        self.cmd = self.dds.reader(settings.cmd_vel_topic, msg.TWIST, settings.qos("cmd_vel"))
+        self.plan = self.dds.reader(settings.plan_topic, msg.PATH, settings.qos("plan"))
 
     def send_odometry(self, x: float, y: float, yaw: float) -> None:
         odom = msg.make(msg.ODOMETRY, header=msg.header(time.time(), "odom"), child_frame_id="base_link")

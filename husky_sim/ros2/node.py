@@ -36,9 +36,6 @@ from controllers import Controller, ControlResult, Obstacle, Reference, SetPoint
 from husky_sim import interrupts
 from husky_sim.ros2 import messages as msg
 from husky_sim.ros2.transport import (
-    CLOCK_QOS,
-    DEFAULT_QOS,
-    SENSOR_DATA_QOS,
     Participant,
     Ros2Settings,
     take_all,
@@ -166,12 +163,12 @@ class ControllerNode:
         self.stats = ServeStats()
         self._dds = Participant(settings)
         s = settings
-        self._odom = self._dds.reader(s.odometry_topic, msg.ODOMETRY, SENSOR_DATA_QOS)
-        self._goal = self._dds.reader(s.goal_topic, msg.POSE_STAMPED, DEFAULT_QOS)
-        self._markers = self._dds.reader(s.obstacles_topic, msg.MARKER_ARRAY, DEFAULT_QOS)
-        self._clock = self._dds.reader(s.clock_topic, msg.CLOCK, CLOCK_QOS) if s.use_sim_time else None
-        self.cmd_vel = self._dds.writer(s.cmd_vel_topic, msg.TWIST, DEFAULT_QOS)
-        self._plan = self._dds.writer(s.plan_topic, msg.PATH, DEFAULT_QOS)
+        self._odom = self._dds.reader(s.odometry_topic, msg.ODOMETRY, s.qos("odometry"))
+        self._goal = self._dds.reader(s.goal_topic, msg.POSE_STAMPED, s.qos("goal"))
+        self._markers = self._dds.reader(s.obstacles_topic, msg.MARKER_ARRAY, s.qos("obstacles"))
+        self._clock = self._dds.reader(s.clock_topic, msg.CLOCK, s.qos("clock")) if s.use_sim_time else None
+        self.cmd_vel = self._dds.writer(s.cmd_vel_topic, msg.TWIST, s.qos("cmd_vel"))
+        self._plan = self._dds.writer(s.plan_topic, msg.PATH, s.qos("plan"))
         self._waitset = WaitSet(self._dds.participant)
         mask = SampleState.NotRead | ViewState.Any | InstanceState.Any
         for reader in (self._odom, self._goal, self._markers, self._clock):

@@ -25,9 +25,6 @@ from husky_sim import interrupts
 from husky_sim.ros2 import messages as msg
 from husky_sim.ros2.node import obstacles_to_markers
 from husky_sim.ros2.transport import (
-    CLOCK_QOS,
-    DEFAULT_QOS,
-    SENSOR_DATA_QOS,
     Participant,
     Ros2Settings,
     take_all,
@@ -54,12 +51,12 @@ class DdsRobot:
         )
         self._dds = Participant(settings)
         s = settings
-        self._odom = self._dds.writer(s.odometry_topic, msg.ODOMETRY, SENSOR_DATA_QOS)
-        self._markers = self._dds.writer(s.obstacles_topic, msg.MARKER_ARRAY, DEFAULT_QOS)
-        self._clock = self._dds.writer(s.clock_topic, msg.CLOCK, CLOCK_QOS)
-        self._goal = self._dds.writer(s.goal_topic, msg.POSE_STAMPED, DEFAULT_QOS)
-        self._cmd = self._dds.reader(s.cmd_vel_topic, msg.TWIST, DEFAULT_QOS)
-        self._plan = self._dds.reader(s.plan_topic, msg.PATH, DEFAULT_QOS)
+        self._odom = self._dds.writer(s.odometry_topic, msg.ODOMETRY, s.qos("odometry"))
+        self._markers = self._dds.writer(s.obstacles_topic, msg.MARKER_ARRAY, s.qos("obstacles"))
+        self._clock = self._dds.writer(s.clock_topic, msg.CLOCK, s.qos("clock"))
+        self._goal = self._dds.writer(s.goal_topic, msg.POSE_STAMPED, s.qos("goal"))
+        self._cmd = self._dds.reader(s.cmd_vel_topic, msg.TWIST, s.qos("cmd_vel"))
+        self._plan = self._dds.reader(s.plan_topic, msg.PATH, s.qos("plan"))
         self._waitset = WaitSet(self._dds.participant)
         self._waitset.attach(
             ReadCondition(self._cmd, SampleState.NotRead | ViewState.Any | InstanceState.Any)

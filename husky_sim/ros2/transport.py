@@ -9,6 +9,7 @@ commands, goals, plans and obstacles, and the clock's (best effort, keep last 1)
 from __future__ import annotations
 
 import os
+import re
 from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import Any
@@ -40,6 +41,8 @@ DEFAULT_QOS = Qos(
     _XCDR1,
 )
 CLOCK_QOS = Qos(Policy.Reliability.BestEffort, Policy.History.KeepLast(1), Policy.Durability.Volatile, _XCDR1)
+#: The profiles a topic's QoS setting may name (ROS 2's names).
+QOS_PROFILES: dict[str, Qos] = {"sensor_data": SENSOR_DATA_QOS, "default": DEFAULT_QOS, "clock": CLOCK_QOS}
 
 #: Cyclone DDS configuration that keeps all traffic on this machine's loopback interface: no
 #: multicast, discovery by unicast to 127.0.0.1. A rehearsal uses it so its /cmd_vel can never
@@ -107,6 +110,13 @@ class Ros2Settings:
     obstacles_topic: str = "/obstacles"  # visualization_msgs/MarkerArray of cylinders in
     plan_topic: str = "/plan"  # nav_msgs/Path out (Nav2's name)
     clock_topic: str = "/clock"  # rosgraph_msgs/Clock, read only with use_sim_time
+    # each topic's QoS profile (QOS_PROFILES); both ends of a topic must offer what the other asks
+    odometry_qos: str = "sensor_data"
+    cmd_vel_qos: str = "default"
+    goal_qos: str = "default"
+    obstacles_qos: str = "default"
+    plan_qos: str = "default"
+    clock_qos: str = "clock"
     odom_frame: str = "odom"  # frame of poses, obstacles and plans
     base_frame: str = "base_link"  # odometry's child frame
     use_sim_time: bool = False  # the node's clock is /clock (a simulator) instead of the wall clock
@@ -117,12 +127,21 @@ class Ros2Settings:
         for f in fields(self):
             if f.name.endswith("_topic"):
                 topic = getattr(self, f.name)
-                if not (topic.startswith("/") and len(topic) > 1 and " " not in topic):
+                if not re.fullmatch(r"(/[A-Za-z_][A-Za-z0-9_]*)+", topic):
                     raise ValueError(
-                        f"{f.name}: expected an absolute ROS 2 topic name like /cmd_vel, got {topic!r}"
+                        f"{f.name}: expected an absolute ROS 2 topic name like /cmd_vel, got {topic[:40]!r}"
                     )
+            profile = getattr(self, f.name)
+            if f.name.endswith("_qos") and profile not in QOS_PROFILES:
+                raise ValueError(
+                    f"{f.name}: expected one of {', '.join(QOS_PROFILES)}, got {str(profile)[:40]!r}"
+                )
         if self.domain_id is not None:
             check_domain_id(self.domain_id)
+
+    def qos(self, topic: str) -> Qos:
+        """The QoS of a topic by its setting's stem: `qos("odometry")` -> sensor data by default."""
+        return QOS_PROFILES[getattr(self, f"{topic}_qos")]
 
     def resolved_domain_id(self) -> int:
         return domain_id_from_env() if self.domain_id is None else self.domain_id
