@@ -46,12 +46,15 @@ QOS_PROFILES: dict[str, Qos] = {"sensor_data": SENSOR_DATA_QOS, "default": DEFAU
 
 #: Cyclone DDS configuration that keeps all traffic on this machine's loopback interface: no
 #: multicast, discovery by unicast to 127.0.0.1. A rehearsal uses it so its /cmd_vel can never
-#: reach a robot on the network.
+#: reach a robot on the network. Reliable writers send heartbeats every 5 ms instead of 100 ms,
+#: so a write is acknowledged within about a millisecond: the rehearsal robot waits for the
+#: node's acknowledgement of the obstacles each step, which took 74 ms (median) at the default.
 LOCALHOST_ONLY_CONFIG = """<CycloneDDS><Domain id="any">
 <General><Interfaces><NetworkInterface address="127.0.0.1"/></Interfaces>
 <AllowMulticast>false</AllowMulticast></General>
 <Discovery><ParticipantIndex>auto</ParticipantIndex><MaxAutoParticipantIndex>30</MaxAutoParticipantIndex>
 <Peers><Peer address="127.0.0.1"/></Peers></Discovery>
+<Internal><HeartbeatInterval min="1 ms" minsched="1 ms">5 ms</HeartbeatInterval></Internal>
 </Domain></CycloneDDS>"""
 
 
