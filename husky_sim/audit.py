@@ -75,13 +75,28 @@ def radius_margin_m(scenario: Scenario) -> float:
     return scenario.robot.radius() - load_geometry().footprint_radius_m
 
 
+def needed_margin_m(scenario: Scenario, t: AuditThresholds) -> float:
+    """The margin (m) a robot's outline must keep: the larger of the minimum and the sensing noise
+    (t.noise_sigmas sigma of pose plus obstacle position noise)."""
+    s = scenario.sensing
+    return max(t.min_radius_margin_m, t.noise_sigmas * math.hypot(s.pose_xy_std_m, s.obstacle_xy_std_m))
+
+
+def _thin_margin(text: str, needed: float, t: AuditThresholds, values: dict[str, object]) -> Finding:
+    return Finding(
+        "robot radius",
+        "warn",
+        f"{text}: below the {needed:.3f} m margin (max of {t.min_radius_margin_m:.3f} m and "
+        f"{t.noise_sigmas:g} sigma of pose + obstacle noise)",
+        values,
+    )
+
+
 def check_robot_radius(scenario: Scenario, t: AuditThresholds) -> Finding:
     r = scenario.robot.radius()
     footprint = load_geometry().footprint_radius_m
     outline = spec_sheet_half_diagonal_m()
-    s = scenario.sensing
-    noise = t.noise_sigmas * math.hypot(s.pose_xy_std_m, s.obstacle_xy_std_m)
-    needed = max(t.min_radius_margin_m, noise)
+    needed = needed_margin_m(scenario, t)
     margin = r - footprint
     values = {
         "robot_radius_m": r,
@@ -99,13 +114,7 @@ def check_robot_radius(scenario: Scenario, t: AuditThresholds) -> Finding:
             values,
         )
     if margin < needed:
-        return Finding(
-            "robot radius",
-            "warn",
-            f"{text}: below the {needed:.3f} m margin (max of {t.min_radius_margin_m:.3f} m and "
-            f"{t.noise_sigmas:g} sigma of pose + obstacle noise)",
-            values,
-        )
+        return _thin_margin(text, needed, t, values)
     if r < outline:
         return Finding(
             "robot radius",
@@ -202,8 +211,7 @@ def check_body_discs(scenario: Scenario, t: AuditThresholds) -> Finding:
 
     cfg = scenario.husky_cbf_config()
     centres, radius = disc_cover(cfg.footprint, cfg.disc_excess_m)
-    s = scenario.sensing
-    needed = max(t.min_radius_margin_m, t.noise_sigmas * math.hypot(s.pose_xy_std_m, s.obstacle_xy_std_m))
+    needed = needed_margin_m(scenario, t)
     f = cfg.footprint
     values = {
         "discs": len(centres),
@@ -218,13 +226,7 @@ def check_body_discs(scenario: Scenario, t: AuditThresholds) -> Finding:
         f"{cfg.margin_m:.3f} m off obstacles"
     )
     if cfg.margin_m < needed:
-        return Finding(
-            "robot radius",
-            "warn",
-            f"{text}: below the {needed:.3f} m margin (max of {t.min_radius_margin_m:.3f} m and "
-            f"{t.noise_sigmas:g} sigma of pose + obstacle noise)",
-            values,
-        )
+        return _thin_margin(text, needed, t, values)
     return Finding("robot radius", "pass", f"{text}, >= needed {needed:.3f} m", values)
 
 

@@ -25,6 +25,7 @@ import numpy as np
 from foxglove import messages as fm
 
 from controllers import ControlResult, Reference, SetPoint
+from husky_sim.episode import LOG_COLUMNS
 
 #: The file a run folder's recording is written to.
 MCAP_NAME = "run.mcap"
@@ -33,14 +34,8 @@ MCAP_NAME = "run.mcap"
 LIVE_PORT = 8765
 
 _ODOM, _BASE = "odom", "base_link"
-_CONTROL_FIELDS = (
-    "v_cmd_mps",
-    "omega_cmd_radps",
-    "v_applied_mps",
-    "omega_applied_radps",
-    "v_body_mps",
-    "omega_body_radps",
-)
+#: the log's velocity columns: commanded, drive-limited and measured v (m/s) and omega (rad/s)
+_CONTROL_FIELDS = tuple(c for c in LOG_COLUMNS if c.startswith(("v_", "omega_")))
 _SAFETY_FIELDS = ("clearance_m", "s_h_min", "s_v_max", "safety_active", "solve_ms")
 _SAFETY_TEXT = ("status", "fallback", "recovered_by", "soft_constraint", "guided", "deadline_miss")
 
