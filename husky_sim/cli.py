@@ -374,6 +374,8 @@ def _cmd_serve(args: argparse.Namespace) -> int:
     sc = load_scenario(args.scenario).with_overrides(args.horizon, args.gamma, None)
     settings = _ros2_settings(args, use_sim_time=args.use_sim_time, localhost_only=args.localhost_only)
     domain = settings.resolved_domain_id()  # a bad ROS_DOMAIN_ID is a one-line error before anything runs
+    if args.solve_budget is not None and args.solve_budget > sc.tau_s:
+        raise UsageError(f"--solve-budget: must be at most tau = {sc.tau_s:g} s, got {args.solve_budget:g}")
     controller = sc.make_controller(args.controller)
     interrupts.begin_run()
     horizon, gamma = sc.controller.horizon, sc.controller.gamma
@@ -389,7 +391,9 @@ def _cmd_serve(args: argparse.Namespace) -> int:
         flush=True,
     )
     try:
-        stats = serve(controller, sc.reference_object(), sc.tau_s, settings, out, duration_s=args.duration)
+        stats = serve(
+            controller, sc.reference_object(), sc.tau_s, settings, out, args.duration, args.solve_budget
+        )
         reason = f"after {args.duration:g} s"
     except interrupts.RunInterrupted as exc:  # the normal way to stop a node: it has sent a zero command
         import signal
@@ -464,6 +468,12 @@ def build_parser() -> argparse.ArgumentParser:
     serve.add_argument("--out", type=_path, default=None, help="folder for serve.csv and serve_summary.json")
     serve.add_argument(
         "--duration", type=_number_in(float, 0.0, 1e7), default=None, help="stop after this many s"
+    )
+    serve.add_argument(
+        "--solve-budget",
+        type=_number_in(float, 1e-6, 10.0),
+        default=None,
+        help="s; a slower solve is dropped and a zero command sent (default tau; at most tau)",
     )
     serve.add_argument("--use-sim-time", action="store_true", help="the node's clock is /clock (a simulator)")
     serve.add_argument("--localhost-only", action="store_true", help="keep DDS traffic on 127.0.0.1")

@@ -143,6 +143,8 @@ def test_serve_rejects_bad_input_in_one_line(capsys: pytest.CaptureFixture[str],
     assert main(["serve", "husky_point_stabilisation", "--cmd-vel-topic", "cmd_vel"]) == 2
     err = capsys.readouterr().err.strip()
     assert "cmd_vel_topic: expected an absolute ROS 2 topic name" in err and len(err.splitlines()) == 1
+    assert main(["serve", "husky_point_stabilisation", "--solve-budget", "0.5"]) == 2
+    assert "--solve-budget: must be at most tau = 0.2 s, got 0.5" in capsys.readouterr().err
     assert main(["rehearse", "husky_point_stabilisation", "--reply-timeout", "0"]) == 2
     assert "--reply-timeout: expected a number in [0.01, 600], got 0" in capsys.readouterr().err
     monkeypatch.setenv("ROS_DOMAIN_ID", "999")
@@ -193,8 +195,8 @@ def husky_cbf():
     return sc, sc.make_controller("husky-cbf", 5)
 
 
-def _start_node(controller, reference, tau_s: float, settings: Ros2Settings, out: Path):
-    node = ControllerNode(controller, reference, tau_s, settings, out)
+def _start_node(controller, reference, tau_s: float, settings: Ros2Settings, out: Path, budget_s=None):
+    node = ControllerNode(controller, reference, tau_s, settings, out, budget_s)
     stop = threading.Event()
     thread = threading.Thread(target=node.spin, kwargs={"stop": stop.is_set}, daemon=True)
     thread.start()
@@ -229,7 +231,7 @@ def test_node_commands_on_fresh_odometry_and_stops_the_robot_otherwise(husky_cbf
     robot.goal.write(goal)
     robot.commands(0.6, odometry=start)
     assert node.stats.goals_received == 1 and node.reference == SetPoint(-5.0, 0.0, pytest.approx(0.0))
-    stale = robot.commands(1.0)[2:]  # the first may still answer the last odometry
+    stale = robot.commands(1.5)[2:]  # the first may still answer the last odometry
     assert stale and all(t.linear.x == 0 and t.angular.z == 0 for t in stale)
     stop.set()
     thread.join(10)
@@ -244,12 +246,12 @@ def test_node_commands_on_fresh_odometry_and_stops_the_robot_otherwise(husky_cbf
 
 @pytest.mark.slow
 def test_a_solve_longer_than_tau_sends_zero_not_its_plan(husky_cbf, tmp_path: Path) -> None:
-    """With a period shorter than any solve (3 ms), every result is late: each is dropped, a
-    zero command sent and no plan published."""
+    """With a solve budget shorter than any solve (1 us), every result is late: each is dropped,
+    a zero command sent and no plan published."""
     sc, controller = husky_cbf
     settings = Ros2Settings(domain_id=_domain(), localhost_only=True)
     robot = _Robot(settings)
-    node, stop, thread = _start_node(controller, sc.reference_object(), 0.003, settings, tmp_path)
+    node, stop, thread = _start_node(controller, sc.reference_object(), sc.tau_s, settings, tmp_path, 1e-6)
     _wait_matched(robot)
     start = (sc.robot.start.x_m, sc.robot.start.y_m, sc.robot.start.yaw_rad)
     got = robot.commands(1.0, odometry=start)
