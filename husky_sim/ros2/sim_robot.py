@@ -72,7 +72,8 @@ class DdsRobot:
         entities = (self._odom, self._markers, self._goal, self._clock)
         while time.monotonic() < end:
             interrupts.check()
-            if all(w.get_matched_subscriptions() for w in entities) and self._cmd.get_matched_publications():
+            writers_matched = all(w.get_matched_subscriptions() for w in entities)
+            if writers_matched and all(r.get_matched_publications() for r in (self._cmd, self._plan)):
                 return
             time.sleep(0.02)
         raise NodeNotFound(
