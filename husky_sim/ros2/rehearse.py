@@ -40,6 +40,7 @@ def rehearse(
 ) -> dict[str, object]:
     """Run the rehearsal; return the summary (also written to out_dir/summary.json)."""
     prepare_out_dir(out_dir)
+    (out_dir / "summary.json").unlink(missing_ok=True)  # only this rehearsal's may get its transport
     # by default a domain of its own: apart from ROS 2's default 0 and from other rehearsals
     domain = lease_domain_id() if domain_id is None else check_domain_id(domain_id, "--domain-id")
     settings = Ros2Settings(use_sim_time=True, domain_id=domain, localhost_only=True)
