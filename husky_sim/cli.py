@@ -57,6 +57,9 @@ def _path(text: str) -> str:
     return text
 
 
+#: Port of Foxglove's WebSocket server for --live (Foxglove's own default).
+LIVE_PORT = 8765
+
 #: Bounds of the command line's counts: what a 2-core machine (or a cluster) can reasonably run.
 MAX_JOBS = 256
 MAX_SAMPLES = 100_000
@@ -145,8 +148,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
     horizon, gamma = sc.controller.horizon, sc.controller.gamma
     interrupts.begin_run()
     out = Path(args.out) if args.out else default_run_dir(sc.name, args.controller, horizon, gamma, sc.seed)
-    if args.live is not None:
-        print(f"streaming to Foxglove: open ws://127.0.0.1:{args.live} in Foxglove", flush=True)
+    _announce_live(args)
     # creates `out` (or one-line error) first
     summary = run_scenario(sc, args.controller, out_dir=out, live_port=args.live)
     clearance = summary["min_clearance_m"]
@@ -322,7 +324,7 @@ def _ros2_settings(args: argparse.Namespace, **fixed: object):
     """Ros2Settings from the command line's topic, frame and domain options."""
     from dataclasses import fields
 
-    from husky_sim.ros2.transport import Ros2Settings
+    from husky_sim.ros2.settings import Ros2Settings
 
     given = {
         f.name: getattr(args, f.name) for f in fields(Ros2Settings) if getattr(args, f.name, None) is not None
@@ -333,14 +335,14 @@ def _ros2_settings(args: argparse.Namespace, **fixed: object):
 def _add_ros2_arguments(parser: argparse.ArgumentParser) -> None:
     from dataclasses import fields
 
-    from husky_sim.ros2.transport import MAX_DOMAIN_ID, QOS_PROFILES, Ros2Settings
+    from husky_sim.ros2.settings import MAX_DOMAIN_ID, QOS_PROFILE_NAMES, Ros2Settings
 
     for f in fields(Ros2Settings):
         flag = "--" + f.name.replace("_", "-")
         if f.name.endswith(("_topic", "_frame")):
             parser.add_argument(flag, default=None, help=f"default {f.default}")
         elif f.name.endswith("_qos"):
-            parser.add_argument(flag, choices=tuple(QOS_PROFILES), default=None, help=f"default {f.default}")
+            parser.add_argument(flag, choices=QOS_PROFILE_NAMES, default=None, help=f"default {f.default}")
     parser.add_argument(
         "--domain-id",
         type=_number_in(int, 0, MAX_DOMAIN_ID),
@@ -350,8 +352,6 @@ def _add_ros2_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def _add_live_argument(parser: argparse.ArgumentParser) -> None:
-    from husky_sim.foxglove_record import LIVE_PORT
-
     parser.add_argument(
         "--live",
         type=_number_in(int, 1, 65535),
@@ -363,11 +363,16 @@ def _add_live_argument(parser: argparse.ArgumentParser) -> None:
     )
 
 
+def _announce_live(args: argparse.Namespace) -> None:
+    if args.live is not None:
+        print(f"streaming to Foxglove: open ws://127.0.0.1:{args.live} in Foxglove", flush=True)
+
+
 def _cmd_serve(args: argparse.Namespace) -> int:
     from pathlib import Path
 
     from husky_sim.ros2.node import serve
-    from husky_sim.run import RESULTS_DIR, run_dir_name
+    from husky_sim.run import default_run_dir
     from husky_sim.scenario import load_scenario
 
     interrupts.check()
@@ -382,7 +387,7 @@ def _cmd_serve(args: argparse.Namespace) -> int:
     out = (
         Path(args.out)
         if args.out
-        else RESULTS_DIR / ("serve__" + run_dir_name(sc.name, args.controller, horizon, gamma, sc.seed))
+        else default_run_dir(sc.name, args.controller, horizon, gamma, sc.seed, "serve")
     )
     print(
         f"serving {args.controller} N={horizon} on DDS domain {domain}: {settings.odometry_topic} + "
@@ -411,17 +416,19 @@ def _cmd_rehearse(args: argparse.Namespace) -> int:
     from pathlib import Path
 
     from husky_sim.ros2.rehearse import rehearse
-    from husky_sim.run import RESULTS_DIR, run_dir_name
+    from husky_sim.run import default_run_dir
     from husky_sim.scenario import load_scenario
 
     interrupts.check()
     sc = load_scenario(args.scenario).with_overrides(args.horizon, args.gamma, args.seed)
     horizon, gamma = sc.controller.horizon, sc.controller.gamma
     interrupts.begin_run()
-    name = "rehearse__" + run_dir_name(sc.name, args.controller, horizon, gamma, sc.seed)
-    out = Path(args.out) if args.out else RESULTS_DIR / name
-    if args.live is not None:
-        print(f"streaming to Foxglove: open ws://127.0.0.1:{args.live} in Foxglove", flush=True)
+    out = (
+        Path(args.out)
+        if args.out
+        else default_run_dir(sc.name, args.controller, horizon, gamma, sc.seed, "rehearse")
+    )
+    _announce_live(args)
     summary = rehearse(sc, args.controller, out, args.domain_id, args.reply_timeout, live_port=args.live)
     transport = summary["transport"]
     latency = transport["cmd_vel_latency_ms"]
@@ -439,6 +446,7 @@ def _cmd_rehearse(args: argparse.Namespace) -> int:
 
 def build_parser() -> argparse.ArgumentParser:
     from husky_sim.rendering import add_render_arguments
+    from husky_sim.ros2.settings import MAX_DOMAIN_ID
 
     parser = _OneLineErrorParser(prog="husky-sim", description="Husky A200 NMPC-CLF/CBF validation suite")
     sub = parser.add_subparsers(dest="command", required=True)
@@ -492,9 +500,9 @@ def build_parser() -> argparse.ArgumentParser:
     )
     rehearse.add_argument(
         "--domain-id",
-        type=_number_in(int, 0, 232),
+        type=_number_in(int, 0, MAX_DOMAIN_ID),
         default=None,
-        help="DDS domain (default 100 + pid %% 100)",
+        help=f"DDS domain in [0, {MAX_DOMAIN_ID}] (default: the first free of 100 to 199 on this machine)",
     )
     rehearse.add_argument(
         "--reply-timeout", type=_number_in(float, 0.01, 600.0), default=10.0,

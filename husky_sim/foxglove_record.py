@@ -30,9 +30,6 @@ from husky_sim.episode import LOG_COLUMNS
 #: The file a run folder's recording is written to.
 MCAP_NAME = "run.mcap"
 
-#: Default port of `--live` (Foxglove's).
-LIVE_PORT = 8765
-
 _ODOM, _BASE = "odom", "base_link"
 #: the log's velocity columns: commanded, drive-limited and measured v (m/s) and omega (rad/s)
 _CONTROL_FIELDS = tuple(c for c in LOG_COLUMNS if c.startswith(("v_", "omega_")))
@@ -90,7 +87,7 @@ class FoxgloveRecorder:
 
     def __init__(
         self,
-        path: Path,
+        path: Path | None,
         reference: Reference,
         obstacle_radii_m: Sequence[float],
         obstacle_heights_m: Sequence[float],
@@ -106,7 +103,10 @@ class FoxgloveRecorder:
                 self._server = foxglove.start_server(name="husky-sim", port=live_port, context=self._context)
             except RuntimeError as exc:
                 raise ValueError(f"--live: cannot serve Foxglove on 127.0.0.1:{live_port} ({exc})") from None
-        self._writer = foxglove.open_mcap(path, allow_overwrite=True, context=self._context)
+        # no path: live only (a run that writes no folder)
+        self._writer = (
+            None if path is None else foxglove.open_mcap(path, allow_overwrite=True, context=self._context)
+        )
         ctx = self._context
         self._tf = foxglove.channels.FrameTransformChannel("/tf", context=ctx)
         self._pose = foxglove.channels.PoseInFrameChannel("/robot/pose", context=ctx)
@@ -255,7 +255,8 @@ class FoxgloveRecorder:
                        name="husky-sim", file="", line=0),
                 log_time=_ns(self._last_t),
             )  # fmt: skip
-        self._writer.close()
+        if self._writer is not None:
+            self._writer.close()
         if self._server is not None:
             self._server.stop()
 

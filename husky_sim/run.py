@@ -29,14 +29,20 @@ def _safe_component(text: str) -> str:
     return cleaned[:80] or "_"
 
 
-def run_dir_name(scenario: str, controller: str, horizon: int, gamma: float, seed: int) -> str:
+def run_dir_name(
+    scenario: str, controller: str, horizon: int, gamma: float, seed: int, kind: str = ""
+) -> str:
     """The one name of a run's folder: never a path outside its parent, whatever the scenario's
-    name holds (the schema already restricts names; this holds for any caller)."""
-    return _safe_component(f"{scenario}__{controller}__N{horizon}__g{gamma:g}__s{seed}")
+    name holds (the schema already restricts names; this holds for any caller). `kind` prefixes
+    folders of other commands than `run` (`serve`, `rehearse`)."""
+    prefix = f"{kind}__" if kind else ""
+    return _safe_component(f"{prefix}{scenario}__{controller}__N{horizon}__g{gamma:g}__s{seed}")
 
 
-def default_run_dir(scenario: str, controller: str, horizon: int, gamma: float, seed: int) -> Path:
-    return RESULTS_DIR / run_dir_name(scenario, controller, horizon, gamma, seed)
+def default_run_dir(
+    scenario: str, controller: str, horizon: int, gamma: float, seed: int, kind: str = ""
+) -> Path:
+    return RESULTS_DIR / run_dir_name(scenario, controller, horizon, gamma, seed, kind)
 
 
 def prepare_out_dir(out_dir: Path) -> Path:
@@ -159,13 +165,12 @@ def run_scenario(
 def _recorder(
     sc: Scenario, reference: Reference, out_dir: Path | None, live_port: int | None
 ) -> FoxgloveRecorder | None:
-    """The run's Foxglove recorder (run.mcap in out_dir), or None when nothing is written."""
+    """The run's Foxglove recorder (run.mcap in out_dir, and live on live_port), or None when
+    neither is asked for."""
     if out_dir is None and live_port is None:
         return None
-    import tempfile
-
     specs = sc.obstacle_specs()
-    path = out_dir / MCAP_NAME if out_dir is not None else Path(tempfile.mkdtemp()) / MCAP_NAME
+    path = out_dir / MCAP_NAME if out_dir is not None else None
     return FoxgloveRecorder(
         path,
         reference,

@@ -24,15 +24,14 @@ from husky_sim.foxglove_record import MCAP_NAME, FoxgloveRecorder
 from husky_sim.ros2 import messages as msg
 from husky_sim.ros2.node import ControllerNode
 from husky_sim.ros2.rehearse import rehearse
+from husky_sim.ros2.settings import Ros2Settings, domain_id_from_env, lease_domain_id
 from husky_sim.ros2.transport import (
     DEFAULT_QOS,
     SENSOR_DATA_QOS,
     Participant,
-    Ros2Settings,
     dds_topic_name,
-    domain_id_from_env,
-    lease_domain_id,
     take_all,
+    topic_qos,
 )
 from husky_sim.run import run_scenario
 from husky_sim.scenario import load_scenario
@@ -124,9 +123,9 @@ def test_names_and_settings() -> None:
         ValueError, match="odometry_qos: expected one of sensor_data, default, clock, got 'fast'"
     ):
         Ros2Settings(odometry_qos="fast")
-    assert Ros2Settings().qos("odometry") is SENSOR_DATA_QOS
-    assert Ros2Settings(odometry_qos="default").qos("odometry") is DEFAULT_QOS
-    assert Ros2Settings().qos("cmd_vel") is DEFAULT_QOS
+    assert topic_qos(Ros2Settings(), "odometry") is SENSOR_DATA_QOS
+    assert topic_qos(Ros2Settings(odometry_qos="default"), "odometry") is DEFAULT_QOS
+    assert topic_qos(Ros2Settings(), "cmd_vel") is DEFAULT_QOS
     assert domain_id_from_env({}) == 0
     assert domain_id_from_env({"ROS_DOMAIN_ID": "42"}) == 42
     with pytest.raises(ValueError, match=r"ROS_DOMAIN_ID: expected an integer in \[0, 232\], got 300"):
@@ -158,10 +157,10 @@ class _Robot:
 
     def __init__(self, settings: Ros2Settings) -> None:
         self.dds = Participant(settings)
-        self.odom = self.dds.writer(settings.odometry_topic, msg.ODOMETRY, settings.qos("odometry"))
-        self.goal = self.dds.writer(settings.goal_topic, msg.POSE_STAMPED, settings.qos("goal"))
-        self.cmd = self.dds.reader(settings.cmd_vel_topic, msg.TWIST, settings.qos("cmd_vel"))
-        self.plan = self.dds.reader(settings.plan_topic, msg.PATH, settings.qos("plan"))
+        self.odom = self.dds.writer(settings.odometry_topic, msg.ODOMETRY, topic_qos(settings, "odometry"))
+        self.goal = self.dds.writer(settings.goal_topic, msg.POSE_STAMPED, topic_qos(settings, "goal"))
+        self.cmd = self.dds.reader(settings.cmd_vel_topic, msg.TWIST, topic_qos(settings, "cmd_vel"))
+        self.plan = self.dds.reader(settings.plan_topic, msg.PATH, topic_qos(settings, "plan"))
 
     def send_odometry(self, x: float, y: float, yaw: float) -> None:
         odom = msg.make(msg.ODOMETRY, header=msg.header(time.time(), "odom"), child_frame_id="base_link")

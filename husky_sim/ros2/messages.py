@@ -53,7 +53,7 @@ def dds_type_name(ros_type: str) -> str:
     return f"{package}::{kind}::dds_::{name}_"
 
 
-def _default_for(annotation: Any, spec: tuple) -> Any:
+def _default_for(spec: tuple) -> Any:
     """A default-value factory for one field, so messages can be built field by field."""
     node, arg = spec
     kind = node.name
@@ -66,7 +66,7 @@ def _default_for(annotation: Any, spec: tuple) -> Any:
         return message_type(arg)
     if kind == "ARRAY":
         (inner_node, inner_arg), length = arg
-        inner = _default_for(None, (inner_node, inner_arg))
+        inner = _default_for((inner_node, inner_arg))
         return lambda: [inner() for _ in range(length)]
     return list  # SEQUENCE: empty
 
@@ -105,7 +105,7 @@ def message_type(ros_type: str) -> type:
         "__qualname__": ros_type.split("/")[-1],
     }
     for name, spec in fields:
-        namespace[name] = dataclasses.field(default_factory=_default_for(annotations[name], spec))
+        namespace[name] = dataclasses.field(default_factory=_default_for(spec))
     cls = types.new_class(
         ros_type.split("/")[-1],
         (IdlStruct,),

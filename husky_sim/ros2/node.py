@@ -36,11 +36,12 @@ from cyclonedds.util import duration
 from controllers import Controller, ControlResult, Obstacle, Reference, SetPoint
 from husky_sim import interrupts
 from husky_sim.ros2 import messages as msg
+from husky_sim.ros2.settings import Ros2Settings
 from husky_sim.ros2.transport import (
     Participant,
-    Ros2Settings,
     take_all,
     take_latest,
+    topic_qos,
 )
 
 #: Odometry older than this many control periods (on the node's clock) stops the robot.
@@ -71,6 +72,15 @@ SERVE_LOG_COLUMNS = (
 EVENTS = ("command", "stale", "brake", "overrun", "shutdown")  # one per serve.csv row
 #: Counted apart (the same step is also a `brake` row): the controller raised instead of returning.
 ERROR = "error"
+#: The controller's own counts, under the names of a run's summary (husky_sim.metrics): only the
+#: node knows them, so a rehearsal's summary takes them from the node's.
+CONTROLLER_COUNTS = (
+    "fallbacks",
+    "recoveries",
+    "soft_constraint_steps",
+    "guided_steps",
+    "safety_active_steps",
+)
 
 
 class ObstacleTracker:
@@ -128,12 +138,7 @@ class ServeStats:
     events: dict[str, int] = field(default_factory=lambda: dict.fromkeys((*EVENTS, ERROR), 0))
     goals_received: int = 0
     rejected: dict[str, int] = field(default_factory=lambda: {"goals": 0, "markers": 0})  # other frames
-    # the controller's own counts, under the names of a run's summary (husky_sim.metrics)
-    controller_counts: dict[str, int] = field(
-        default_factory=lambda: dict.fromkeys(
-            ("fallbacks", "recoveries", "soft_constraint_steps", "guided_steps", "safety_active_steps"), 0
-        )
-    )
+    controller_counts: dict[str, int] = field(default_factory=lambda: dict.fromkeys(CONTROLLER_COUNTS, 0))
     solve_ms: list[float] = field(default_factory=list)
     odom_latency_ms: list[float] = field(default_factory=list)
 
@@ -172,12 +177,14 @@ class ControllerNode:
         self.stats = ServeStats()
         self._dds = Participant(settings)
         s = settings
-        self._odom = self._dds.reader(s.odometry_topic, msg.ODOMETRY, s.qos("odometry"))
-        self._goal = self._dds.reader(s.goal_topic, msg.POSE_STAMPED, s.qos("goal"))
-        self._markers = self._dds.reader(s.obstacles_topic, msg.MARKER_ARRAY, s.qos("obstacles"))
-        self._clock = self._dds.reader(s.clock_topic, msg.CLOCK, s.qos("clock")) if s.use_sim_time else None
-        self.cmd_vel = self._dds.writer(s.cmd_vel_topic, msg.TWIST, s.qos("cmd_vel"))
-        self._plan = self._dds.writer(s.plan_topic, msg.PATH, s.qos("plan"))
+        self._odom = self._dds.reader(s.odometry_topic, msg.ODOMETRY, topic_qos(s, "odometry"))
+        self._goal = self._dds.reader(s.goal_topic, msg.POSE_STAMPED, topic_qos(s, "goal"))
+        self._markers = self._dds.reader(s.obstacles_topic, msg.MARKER_ARRAY, topic_qos(s, "obstacles"))
+        self._clock = (
+            self._dds.reader(s.clock_topic, msg.CLOCK, topic_qos(s, "clock")) if s.use_sim_time else None
+        )
+        self.cmd_vel = self._dds.writer(s.cmd_vel_topic, msg.TWIST, topic_qos(s, "cmd_vel"))
+        self._plan = self._dds.writer(s.plan_topic, msg.PATH, topic_qos(s, "plan"))
         self._waitset = WaitSet(self._dds.participant)
         mask = SampleState.NotRead | ViewState.Any | InstanceState.Any
         for reader in (self._odom, self._goal, self._markers, self._clock):

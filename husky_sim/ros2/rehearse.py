@@ -19,9 +19,9 @@ import sys
 from pathlib import Path
 
 from husky_sim import interrupts
-from husky_sim.ros2.node import timing_stats
+from husky_sim.ros2.node import CONTROLLER_COUNTS, timing_stats
+from husky_sim.ros2.settings import Ros2Settings, check_domain_id, lease_domain_id
 from husky_sim.ros2.sim_robot import DdsRobot, NodeNotFound
-from husky_sim.ros2.transport import Ros2Settings, check_domain_id, lease_domain_id
 from husky_sim.run import controller_header, prepare_out_dir, run_scenario, write_summary
 from husky_sim.scenario import Scenario
 from husky_sim.scenario_file import scenario_yaml
@@ -74,13 +74,7 @@ def rehearse(
         if summary is not None or (out_dir / "summary.json").exists():
             summary = summary or json.loads((out_dir / "summary.json").read_text())
             # what only the controller knows comes from the node (the robot saw commands alone)
-            for key in (
-                "fallbacks",
-                "recoveries",
-                "soft_constraint_steps",
-                "guided_steps",
-                "safety_active_steps",
-            ):
+            for key in CONTROLLER_COUNTS:
                 summary[key] = node_summary.get(key)
             summary["transport"] = {
                 "dds_domain_id": domain,

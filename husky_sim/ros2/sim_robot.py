@@ -24,11 +24,12 @@ from controllers.model import wrap_angle
 from husky_sim import interrupts
 from husky_sim.ros2 import messages as msg
 from husky_sim.ros2.node import obstacles_to_markers
+from husky_sim.ros2.settings import Ros2Settings
 from husky_sim.ros2.transport import (
     Participant,
-    Ros2Settings,
     take_all,
     take_latest,
+    topic_qos,
 )
 
 
@@ -51,12 +52,12 @@ class DdsRobot:
         )
         self._dds = Participant(settings)
         s = settings
-        self._odom = self._dds.writer(s.odometry_topic, msg.ODOMETRY, s.qos("odometry"))
-        self._markers = self._dds.writer(s.obstacles_topic, msg.MARKER_ARRAY, s.qos("obstacles"))
-        self._clock = self._dds.writer(s.clock_topic, msg.CLOCK, s.qos("clock"))
-        self._goal = self._dds.writer(s.goal_topic, msg.POSE_STAMPED, s.qos("goal"))
-        self._cmd = self._dds.reader(s.cmd_vel_topic, msg.TWIST, s.qos("cmd_vel"))
-        self._plan = self._dds.reader(s.plan_topic, msg.PATH, s.qos("plan"))
+        self._odom = self._dds.writer(s.odometry_topic, msg.ODOMETRY, topic_qos(s, "odometry"))
+        self._markers = self._dds.writer(s.obstacles_topic, msg.MARKER_ARRAY, topic_qos(s, "obstacles"))
+        self._clock = self._dds.writer(s.clock_topic, msg.CLOCK, topic_qos(s, "clock"))
+        self._goal = self._dds.writer(s.goal_topic, msg.POSE_STAMPED, topic_qos(s, "goal"))
+        self._cmd = self._dds.reader(s.cmd_vel_topic, msg.TWIST, topic_qos(s, "cmd_vel"))
+        self._plan = self._dds.reader(s.plan_topic, msg.PATH, topic_qos(s, "plan"))
         self._waitset = WaitSet(self._dds.participant)
         self._waitset.attach(
             ReadCondition(self._cmd, SampleState.NotRead | ViewState.Any | InstanceState.Any)
