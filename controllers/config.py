@@ -22,6 +22,10 @@ SAFETY_CONSTRAINTS: tuple[SafetyConstraint, ...] = ("none", "bt", "cbf", "relax-
 #: Every controller a simulator may choose: the paper's variants and ours (controllers.husky_cbf).
 CONTROLLER_NAMES: tuple[str, ...] = (*SAFETY_CONSTRAINTS, "husky-cbf")
 
+SolverBackend = Literal["fatrop", "ipopt", "opti"]
+#: NLP solvers (controllers.backends): structured FATROP, reference IPOPT (default), naive Opti.
+SOLVER_BACKENDS: tuple[SolverBackend, ...] = ("fatrop", "ipopt", "opti")
+
 ObstaclePrediction = Literal["constant-velocity", "frozen"]
 OBSTACLE_PREDICTIONS: tuple[ObstaclePrediction, ...] = ("constant-velocity", "frozen")
 
@@ -55,8 +59,10 @@ def _as_matrix(value: Sequence[float] | Sequence[Sequence[float]], size: int, na
 
 @dataclass(frozen=True)
 class SolverOptions:
-    """IPOPT settings; a tight constraint tolerance so that plans satisfy their constraints to 1e-6."""
+    """Which NLP solver and its settings; a tight constraint tolerance so that plans satisfy
+    their constraints to 1e-6 (IPOPT 1e-8; FATROP's solutions are checked to 1e-6)."""
 
+    backend: SolverBackend = "ipopt"  # fatrop: faster, not yet the default (controllers.backends.fatrop)
     max_iter: int = 200
     tol: float = 1e-6  # IPOPT's overall (scaled) optimality tolerance
     acceptable_tol: float = 1e-6
@@ -64,6 +70,8 @@ class SolverOptions:
     max_wall_time_s: float = 1.0  # a solve taking longer than this is a failure (fallback)
 
     def __post_init__(self) -> None:
+        if self.backend not in SOLVER_BACKENDS:
+            raise ConfigError(f"solver.backend: must be one of {SOLVER_BACKENDS}, got {self.backend!r}")
         if self.max_iter < 1:
             raise ConfigError(f"solver.max_iter: must be >= 1, got {self.max_iter}")
         for name in ("tol", "acceptable_tol", "constr_viol_tol", "max_wall_time_s"):

@@ -30,16 +30,18 @@ class ControlResult:
     decay_slack: np.ndarray  # s_h (N,); ones where s_h is not a variable
     predicted_barrier: np.ndarray  # (obstacles considered, N+1) B = d^2 - (r_rb + r_ob)^2 (m^2)
     safety_active: int  # obstacle constraints at their bound (residual <= ACTIVE_TOL)
-    status: str  # IPOPT return status, or the reason of a fallback
-    success: bool  # IPOPT converged to a (possibly acceptable) optimum
+    status: str  # the solver's return status, or the reason of a fallback
+    success: bool  # the solver converged to a (possibly acceptable) optimum
     fallback: FallbackKind  # what was applied instead of a solved plan
-    iterations: int  # IPOPT iterations (-1 when no solve ran)
+    iterations: int  # solver iterations (-1 when no solve ran or the solver does not report it)
     solve_time_s: float  # wall time of the whole `solve` call (s)
     obstacles_considered: int  # obstacles in the NLP this step (<= obstacle slots)
     obstacles_ignored: int  # obstacles dropped because more than the slots were given
     recovered_by: str = ""  # the retry guess that solved after a failed solve (controllers.recovery)
     soft_constraint: bool = False  # solved only with the obstacle constraint's exact-penalty slack
     guided: bool = False  # tracked a guidance waypoint instead of the reference (path blocked)
+    solver: str = ""  # the NLP solver whose answer this is (fatrop, ipopt, opti)
+    solver_fallback: str = ""  # why the structured solver's answer was not used (IPOPT solved)
 
     @property
     def is_fallback(self) -> bool:

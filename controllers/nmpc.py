@@ -16,17 +16,17 @@ reaches the program's handler (controllers.signals).
 from __future__ import annotations
 
 import time
-from collections.abc import Sequence
-from typing import Literal
+from collections.abc import Callable, Sequence
 
 import numpy as np
 
-from controllers.backends import BACKENDS, RawSolution, sx_problem
+from controllers.backends import FatropSolver, IpoptSolver, RawSolution, make_solver
+from controllers.backends.opti import OptiSolver
 from controllers.config import NMPCConfig
 from controllers.interface import ControlResult, FallbackKind
 from controllers.model import step
 from controllers.obstacles import Obstacle, predict_obstacles
-from controllers.ocp import OCPParameters, Plan
+from controllers.ocp import OCPParameters, Plan, paper_nlp, sx_problem
 from controllers.recovery import recovery_commands
 from controllers.references import Reference
 from controllers.signals import deliver_after_solve
@@ -38,13 +38,19 @@ ACTIVE_TOL = 1e-4
 class NMPCController:
     """NMPC with CLF and obstacle constraints; one NLP built per configuration."""
 
-    def __init__(self, config: NMPCConfig, backend: Literal["nlpsol", "opti"] = "nlpsol") -> None:
+    def __init__(self, config: NMPCConfig) -> None:
         self.config = config
-        self._backend = BACKENDS[backend](config)
+        if config.solver.backend == "opti":
+            self._backend: OptiSolver | FatropSolver | IpoptSolver = OptiSolver(config)
+        else:
+            self._backend = make_solver(paper_nlp(config), config.solver)
         self._problem = sx_problem(config)
         self._layout = self._problem.layout
         self._plan: Plan | None = None  # last successfully solved plan
         self._plan_age = 0  # control steps since that plan was solved
+        #: Called with each control step's problem (parameter vector, warm-start guess) before it
+        #: is solved (not the retries): how `husky-sim bench` records a closed loop to replay.
+        self.on_solve: Callable[[np.ndarray, np.ndarray], None] | None = None
 
     @property
     def backend_name(self) -> str:
@@ -122,11 +128,14 @@ class NMPCController:
         params = self._parameters(state, reference, obstacles, t)
         guess = self._initial_guess(state, params)
         p_vec = params.to_vector()
+        if self.on_solve is not None:
+            self.on_solve(p_vec, guess.to_vector(self._layout))
         with deliver_after_solve():  # an interrupt is delivered, never taken for a failed solve
             try:
                 raw = self._backend.solve(p_vec, guess.to_vector(self._layout))
             except Exception as exc:  # noqa: BLE001 - a control loop must survive any solver error
-                raw = RawSolution(guess.to_vector(self._layout), False, f"exception: {exc}", -1)
+                guess_vector = guess.to_vector(self._layout)
+                raw = RawSolution(guess_vector, False, f"exception: {exc}", -1, self.backend_name)
         recovered_by = ""
         if not raw.success:
             retry, recovered_by = self._retry(state, params, p_vec)
@@ -159,6 +168,8 @@ class NMPCController:
             obstacles_considered=n_real,
             obstacles_ignored=ignored,
             recovered_by=recovered_by,
+            solver=raw.solver,
+            solver_fallback=raw.fallback_reason,
         )
 
     def _retry(

@@ -22,10 +22,13 @@ controllers.constraints for why both are needed.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import lru_cache
 
 import casadi as ca
 import numpy as np
 
+from controllers.backends.nlp import NLP
+from controllers.backends.stagewise import StageIndices
 from controllers.config import NMPCConfig
 from controllers.constraints import SAFETY_BUILDERS, barrier
 from controllers.model import CONTROL_DIM, STATE_DIM, rk4_step, wrap_angle_sym
@@ -50,6 +53,18 @@ class OCPLayout:
     def n_parameters(self) -> int:
         n = self.horizon
         return STATE_DIM * (n + 2) + CONTROL_DIM * n + self.slots * (2 * (n + 1) + 1)
+
+    def stages(self) -> StageIndices:
+        """Each stage's entries of S: x_k; u_k with s_v(k) (and s_h(k)) as stage k's controls."""
+        n = self.horizon
+        i = STATE_DIM * (n + 1)
+        j = i + CONTROL_DIM * n
+        states = tuple(tuple(range(STATE_DIM * k, STATE_DIM * (k + 1))) for k in range(n + 1))
+        controls = []
+        for k in range(n):
+            own = [*range(i + CONTROL_DIM * k, i + CONTROL_DIM * (k + 1)), j + k]
+            controls.append(tuple(own + ([j + n + k] if self.has_decay_slack else [])))
+        return StageIndices(states, tuple(controls))
 
 
 @dataclass
@@ -224,3 +239,56 @@ def decision_bounds(config: NMPCConfig, layout: OCPLayout) -> tuple[np.ndarray, 
 
 def layout_for(config: NMPCConfig) -> OCPLayout:
     return OCPLayout(config.horizon, config.obstacle_slots, config.uses_decay_slack)
+
+
+@dataclass(frozen=True)
+class SXProblem:
+    """The OCP in CasADi SX: decision and parameter symbols with their expressions."""
+
+    layout: OCPLayout
+    decision: ca.SX
+    parameters: ca.SX
+    expressions: OCPExpressions
+    diagnostics: ca.Function  # (S, p) -> (safety residuals, barriers (slots, N+1), clf residuals)
+
+
+@lru_cache(maxsize=64)
+def sx_problem(config: NMPCConfig) -> SXProblem:
+    """Formulate the OCP symbolically once per configuration (cached)."""
+    layout = layout_for(config)
+    n = layout.horizon
+    w = ca.SX.sym("S", layout.n_decision)
+    p = ca.SX.sym("p", layout.n_parameters)
+    i = STATE_DIM * (n + 1)
+    j = i + CONTROL_DIM * n
+    decay = w[j + n : j + 2 * n] if layout.has_decay_slack else ca.SX.ones(n)
+    sym = OCPSymbols(
+        states=ca.reshape(w[:i], STATE_DIM, n + 1),
+        controls=ca.reshape(w[i:j], CONTROL_DIM, n),
+        clf_slack=w[j : j + n],
+        decay_slack=decay,
+        parameters=p,
+    )
+    expr = formulate(config, sym, layout)
+    diagnostics = ca.Function(
+        "diagnostics",
+        [w, p],
+        [expr.safety, expr.barriers, expr.clf],
+        ["S", "p"],
+        ["safety", "barriers", "clf"],
+    )
+    return SXProblem(layout, w, p, expr, diagnostics)
+
+
+@lru_cache(maxsize=64)
+def paper_nlp(config: NMPCConfig) -> NLP:
+    """g = [equalities == 0, clf >= 0, safety >= 0] with S's simple bounds (cached)."""
+    problem = sx_problem(config)
+    expr = problem.expressions
+    g = ca.vertcat(expr.equalities, expr.clf, expr.safety)
+    n_eq, n_ineq = expr.equalities.numel(), expr.clf.numel() + expr.safety.numel()
+    lbg = np.zeros(n_eq + n_ineq)
+    ubg = np.concatenate([np.zeros(n_eq), np.full(n_ineq, INF)])
+    lbx, ubx = decision_bounds(config, problem.layout)
+    nlp = {"x": problem.decision, "p": problem.parameters, "f": expr.cost, "g": g}
+    return NLP("nmpc", nlp, (lbx, ubx, lbg, ubg), problem.layout.stages())

@@ -204,6 +204,7 @@ class EpisodeMetrics:
     solve_budget_ms: float  # tau: a solve slower than this delivers its command late on a robot
     solves_over_budget: int  # solves that took longer than tau (wall clock)
     fallbacks: int
+    solver_fallbacks: int  # solves the structured solver failed and IPOPT answered instead
     recoveries: int  # failed solves solved again from a retry guess (controllers.recovery)
     recovered_by: str  # how often each retry guess succeeded, e.g. "reverse=2 straight=1"
     soft_constraint_steps: int  # steps solved only with the obstacle constraint's penalised slack
@@ -296,6 +297,7 @@ def summarise(
         solve_budget_ms=1000.0 * tau_s,
         solves_over_budget=int(np.sum(solve > 1000.0 * tau_s)),
         fallbacks=int(np.sum(col["fallback"] != "none")),
+        solver_fallbacks=int(np.sum(col["solver_fallback"] != "")),
         recoveries=int(np.sum(col["recovered_by"] != "")),
         recovered_by=" ".join(
             f"{name}={int(np.sum(col['recovered_by'] == name))}"

@@ -26,15 +26,34 @@ def test_bench_json_records(capsys: pytest.CaptureFixture[str]) -> None:
     )
     assert code == 0
     records = json.loads(capsys.readouterr().out)
-    assert len(records) == 2 * 2 * 2
-    keys = {"variant", "horizon", "obstacles", "solver", "median_ms", "p95_ms", "max_ms"}
+    assert len(records) == 2 * 2 * 3
+    keys = {
+        "variant",
+        "horizon",
+        "obstacles",
+        "solver",
+        "default",
+        "median_ms",
+        "p95_ms",
+        "p99_ms",
+        "max_ms",
+        "cpu_median_ms",
+        "cpu_p99_ms",
+        "steps",
+        "fallbacks",
+        "first_control_diff_p99",
+    }
     for rec in records:
-        assert keys <= rec.keys()
-        assert rec["horizon"] == 5 and rec["obstacles"] in (1, 7)
-        assert 0 < rec["median_ms"] <= rec["p95_ms"] <= rec["max_ms"]
+        assert set(rec) == keys
+        assert rec["horizon"] == 5 and rec["obstacles"] in (1, 7) and rec["steps"] == 4
+        assert 0 < rec["median_ms"] <= rec["p95_ms"] <= rec["p99_ms"] <= rec["max_ms"]
+        assert 0 < rec["cpu_median_ms"] <= rec["cpu_p99_ms"]
         assert rec["fallbacks"] == 0
-    solvers = {rec["solver"] for rec in records}
-    assert "nlpsol" in solvers and any("opti" in s for s in solvers)
+        if rec["solver"] == "ipopt":
+            assert rec["default"] and rec["first_control_diff_p99"] is None
+        else:
+            assert not rec["default"] and 0 <= rec["first_control_diff_p99"] < 1e-4
+    assert {rec["solver"] for rec in records} == {"fatrop", "ipopt", "opti"}
 
 
 def test_bench_table_has_ratio(capsys: pytest.CaptureFixture[str]) -> None:
@@ -51,6 +70,7 @@ def test_bench_table_has_ratio(capsys: pytest.CaptureFixture[str]) -> None:
         ["bench", "--gamma", "1.5"],
         ["bench", "--variants", "mode3"],
         ["bench", "--obstacles", "9"],
+        ["bench", "--solvers", "hpipm"],
     ],
 )
 def test_bench_bad_input_exits_2(argv: list[str], capsys: pytest.CaptureFixture[str]) -> None:

@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from controllers import CircleTrajectory, NMPCConfig, NMPCController, Obstacle, SetPoint
+from controllers.config import SOLVER_BACKENDS, SolverOptions
 from controllers.model import step, wrap_angle
 
 TOL = 1e-6
@@ -30,18 +31,19 @@ def random_case(rng: np.random.Generator) -> tuple[np.ndarray, Obstacle, SetPoin
     return np.array([*pos, heading]), obstacle, goal
 
 
-@pytest.mark.parametrize("backend", ["nlpsol", "opti"])
+@pytest.mark.parametrize("backend", SOLVER_BACKENDS)
 @pytest.mark.parametrize("variant", VARIANTS)
 def test_solved_plans_satisfy_their_constraints(variant: str, backend: str) -> None:
     rng = np.random.default_rng(7)
-    cfg = NMPCConfig(safety=variant, gamma=0.1, horizon=6)
+    cfg = NMPCConfig(safety=variant, gamma=0.1, horizon=6, solver=SolverOptions(backend=backend))
     n, gamma = cfg.horizon, cfg.gamma
     w_v = np.array(cfg.clf_weight)
     for _ in range(12):
         state, obstacle, goal = random_case(rng)
-        controller = NMPCController(cfg, backend=backend)
+        controller = NMPCController(cfg)
         res = controller.solve(state, goal, [obstacle], 0.0)
         assert res.success, res.status
+        assert res.solver == backend or res.solver_fallback.startswith("fatrop:"), res.solver
         x, u = res.predicted_states, res.predicted_controls
         assert np.allclose(x[0], state, atol=TOL)
         for k in range(n):
@@ -69,15 +71,15 @@ def test_solved_plans_satisfy_their_constraints(variant: str, backend: str) -> N
             assert np.all(b >= -TOL)
 
 
-@pytest.mark.parametrize("backend", ["nlpsol", "opti"])
+@pytest.mark.parametrize("backend", SOLVER_BACKENDS)
 def test_relax_cbf_inside_the_set_recovers_at_least_at_the_cbf_rate(backend: str) -> None:
     """A measured state a hair inside the obstacle circle (B < 0) must not let s_h > 1 loosen
     the constraint: predicted B may not sink below (1 - gamma) times its previous value."""
-    cfg = NMPCConfig(safety="relax-cbf", gamma=0.1, horizon=7)
+    cfg = NMPCConfig(safety="relax-cbf", gamma=0.1, horizon=7, solver=SolverOptions(backend=backend))
     obstacle = Obstacle(0.0, 0.0, 0.6)
     state = np.array([0.0, -0.84, math.pi / 2])  # 0.01 m inside r_sum = 0.85, facing the obstacle
     goal = SetPoint(0.0, 3.0, math.pi / 2)  # straight through the obstacle
-    res = NMPCController(cfg, backend=backend).solve(state, goal, [obstacle], 0.0)
+    res = NMPCController(cfg).solve(state, goal, [obstacle], 0.0)
     assert res.success, res.status
     b = res.predicted_barrier[0]
     assert b[0] < 0

@@ -332,6 +332,8 @@ def test_cli_out_must_be_a_creatable_directory(tmp_path: Path) -> None:
 def test_cli_controller_choices_are_the_controllers_packages() -> None:
     """The CLI names them without importing CasADi before its signal handlers; they must not drift."""
     from controllers import CONTROLLER_NAMES
-    from husky_sim.cli import CONTROLLER_CHOICES
+    from controllers.config import SOLVER_BACKENDS
+    from husky_sim.cli import CONTROLLER_CHOICES, SOLVER_CHOICES
 
     assert CONTROLLER_CHOICES == CONTROLLER_NAMES
+    assert SOLVER_CHOICES == SOLVER_BACKENDS

@@ -23,12 +23,12 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from controllers.backends import IpoptSolver, RawSolution
+from controllers.backends import FatropSolver, IpoptSolver, RawSolution
 from controllers.husky_cbf.config import HuskyCBFConfig
 from controllers.husky_cbf.footprint import disc_cover
 from controllers.husky_cbf.guidance import Guidance, LineApproach, MoverEvasion, inflated_circles
 from controllers.husky_cbf.model import extended_step
-from controllers.husky_cbf.ocp import ExtendedPlan, Layout, make_solver, pack_parameters
+from controllers.husky_cbf.ocp import ExtendedPlan, Layout, pack_parameters, solver_for
 from controllers.interface import ControlResult
 from controllers.model import wrap_angle
 from controllers.obstacles import Obstacle, predict_obstacles
@@ -52,8 +52,9 @@ class HuskyCBFController:
     def __init__(self, config: HuskyCBFConfig) -> None:
         self.config = config
         base = config.nmpc
-        self._hard_problem, self._hard = make_solver(config, base.horizon, config.slots, soft=False)
-        self._soft_problem, self._soft = make_solver(config, base.horizon, config.slots, soft=True)
+        self._hard_problem, self._hard = solver_for(config, base.horizon, config.slots, soft=False)
+        self._soft_problem, self._soft = solver_for(config, base.horizon, config.slots, soft=True)
+        self._solver_fallbacks: list[str] = []  # this step's reasons the structured solver failed
         self._discs, self._disc_radius = disc_cover(config.footprint, config.disc_excess_m)
         self._guidance = Guidance(config.guidance, self._disc_radius + config.margin_m)
         self._approach = LineApproach(config.guidance)
@@ -205,17 +206,23 @@ class HuskyCBFController:
         return np.array(out)
 
     # -- solving --------------------------------------------------------------------------
-    def _solve(self, solver: IpoptSolver, layout: Layout, p: np.ndarray, guess: ExtendedPlan) -> RawSolution:
+    def _solve(
+        self, solver: FatropSolver | IpoptSolver, layout: Layout, p: np.ndarray, guess: ExtendedPlan
+    ) -> RawSolution:
         with deliver_after_solve():  # an interrupt is delivered, never taken for a failed solve
             try:
-                return solver.solve(p, guess.to_vector(layout))
+                raw = solver.solve(p, guess.to_vector(layout))
             except Exception as exc:  # noqa: BLE001 - a control loop must survive any solver error
-                return RawSolution(guess.to_vector(layout), False, f"exception: {exc}", -1)
+                return RawSolution(guess.to_vector(layout), False, f"exception: {exc}", -1, solver.name)
+        if raw.fallback_reason:
+            self._solver_fallbacks.append(raw.fallback_reason)
+        return raw
 
     def solve(
         self, state: np.ndarray, reference: Reference, obstacles: Sequence[Obstacle], t: float
     ) -> ControlResult:
         start = time.perf_counter()
+        self._solver_fallbacks = []
         cfg, base = self.config, self.config.nmpc
         pose = np.asarray(state, dtype=float).reshape(-1)
         n_real = min(len(obstacles), cfg.slots)
@@ -290,6 +297,8 @@ class HuskyCBFController:
             recovered_by=recovered_by,
             soft_constraint=bool(np.max(plan.sigma, initial=0.0) > SLACK_TOL),
             guided=guided,
+            solver=raw.solver,
+            solver_fallback="; ".join(dict.fromkeys(self._solver_fallbacks)),
         )
 
     def _barriers(self, plan: ExtendedPlan, p: np.ndarray, layout: Layout, n_real: int) -> np.ndarray:
@@ -315,4 +324,6 @@ class HuskyCBFController:
             self._advance(pose, z0[5], braking.states[1, 5], braking.states[1, 3:5].copy())
         else:
             self._yaw_prev = None
-        return ControlResult.brake(n, n_real, ignored, time.perf_counter() - start, status, guided)
+        result = ControlResult.brake(n, n_real, ignored, time.perf_counter() - start, status, guided)
+        result.solver_fallback = "; ".join(dict.fromkeys(self._solver_fallbacks))
+        return result

@@ -32,7 +32,8 @@ from functools import lru_cache
 import casadi as ca
 import numpy as np
 
-from controllers.backends import IpoptSolver
+from controllers.backends import NLP, FatropSolver, IpoptSolver, make_solver
+from controllers.backends.stagewise import StageIndices
 from controllers.husky_cbf.config import HuskyCBFConfig
 from controllers.husky_cbf.footprint import disc_cover
 from controllers.husky_cbf.model import CONTROL_DIM, STATE_DIM, extended_step
@@ -69,6 +70,18 @@ class Layout:
     def n_parameters(self) -> int:
         n = self.horizon
         return STATE_DIM + 3 * (n + 1) + 2 * n + self.slots * 3 * (n + 1) + n + 1
+
+    def stages(self) -> StageIndices:
+        """Each stage's entries of S: z_k; a_k, s_v(k), s_h(k) and the obstacle slacks of step k."""
+        n, i, j = self.horizon, self.n_states, self.n_states + self.n_controls
+        states = tuple(tuple(range(STATE_DIM * k, STATE_DIM * (k + 1))) for k in range(n + 1))
+        controls = []
+        for k in range(n):
+            own = [*range(i + CONTROL_DIM * k, i + CONTROL_DIM * (k + 1)), j + k, j + n + k]
+            if self.soft:
+                own += [j + 2 * n + slot * n + k for slot in range(self.slots)]
+            controls.append(tuple(own))
+        return StageIndices(states, tuple(controls))
 
 
 @dataclass
@@ -124,11 +137,10 @@ def pack_parameters(
 
 @dataclass(frozen=True)
 class Problem:
-    """The NLP of one variant with its bounds and a diagnostics function."""
+    """The NLP of one variant (with its bounds and stages) and a diagnostics function."""
 
     layout: Layout
-    nlp: dict[str, ca.SX]
-    bounds: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]
+    nlp: NLP
     barriers: ca.Function  # (S, p) -> (slots * discs, N+1) B values
 
 
@@ -222,11 +234,14 @@ def build_problem(config: HuskyCBFConfig, horizon: int, slots: int, soft: bool) 
     lbx = np.concatenate([lbz, np.tile(-acc, n), np.zeros(n), np.zeros(n), np.zeros(layout.n_sigma)])
     ubx = np.concatenate([ubz, np.tile(acc, n), np.full(n, INF), np.ones(n), np.full(layout.n_sigma, INF)])
     barriers = ca.Function("barriers", [w, p], [ca.vertcat(*barrier_rows)])
-    nlp = {"x": w, "p": p, "f": cost, "g": g}
-    return Problem(layout, nlp, (lbx, ubx, lbg, ubg), barriers)
-
-
-def make_solver(config: HuskyCBFConfig, horizon: int, slots: int, soft: bool) -> tuple[Problem, IpoptSolver]:
-    problem = build_problem(config, horizon, slots, soft)
     name = f"husky_cbf_{'soft' if soft else 'hard'}"
-    return problem, IpoptSolver(name, problem.nlp, problem.bounds, config.nmpc.solver)
+    nlp = NLP(name, {"x": w, "p": p, "f": cost, "g": g}, (lbx, ubx, lbg, ubg), layout.stages())
+    return Problem(layout, nlp, barriers)
+
+
+def solver_for(
+    config: HuskyCBFConfig, horizon: int, slots: int, soft: bool
+) -> tuple[Problem, FatropSolver | IpoptSolver]:
+    """The problem and the solver `config.nmpc.solver.backend` names for it."""
+    problem = build_problem(config, horizon, slots, soft)
+    return problem, make_solver(problem.nlp, config.nmpc.solver)

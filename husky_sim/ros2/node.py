@@ -62,6 +62,7 @@ SERVE_LOG_COLUMNS = (
     "event",
     "status",
     "fallback",
+    "solver_fallback",
     "recovered_by",
     "soft_constraint",
     "guided",
@@ -76,6 +77,7 @@ ERROR = "error"
 #: node knows them, so a rehearsal's summary takes them from the node's.
 CONTROLLER_COUNTS = (
     "fallbacks",
+    "solver_fallbacks",
     "recoveries",
     "soft_constraint_steps",
     "guided_steps",
@@ -293,6 +295,7 @@ class ControllerNode:
         self._publish_twist(command)
         counts = self.stats.controller_counts
         counts["fallbacks"] += result.is_fallback
+        counts["solver_fallbacks"] += bool(result.solver_fallback)
         counts["recoveries"] += bool(result.recovered_by)
         counts["soft_constraint_steps"] += result.soft_constraint
         counts["guided_steps"] += result.guided
@@ -309,6 +312,7 @@ class ControllerNode:
             yaw_rad=float(state[2]),
             obstacles=len(obstacles),
             fallback=result.fallback,
+            solver_fallback=result.solver_fallback,
             recovered_by=result.recovered_by,
             soft_constraint=int(result.soft_constraint),
             guided=int(result.guided),

@@ -1,0 +1,171 @@
+"""Solver backends: the stage-wise transcription is the same OCP, FATROP's answers match IPOPT's,
+its failures fall back to IPOPT and are reported, and compiled solvers are cached and reused."""
+
+import math
+import warnings
+from pathlib import Path
+
+import casadi as ca
+import numpy as np
+import pytest
+
+from controllers import NMPCConfig, NMPCController, Obstacle, SetPoint
+from controllers.backends import FatropSolver, IpoptSolver
+from controllers.backends import compiled as compiled_module
+from controllers.backends.compiled import cache_dir, compiled
+from controllers.backends.nlp import NLP
+from controllers.backends.stagewise import NotStagewiseError, StageIndices, transcribe
+from controllers.config import SolverOptions
+from controllers.husky_cbf.ocp import build_problem
+from controllers.model import step
+from controllers.ocp import OCPParameters, Plan, layout_for, paper_nlp
+from husky_sim.scenario import load_scenario
+
+
+def _feasible_point(config: NMPCConfig, rng: np.random.Generator) -> np.ndarray:
+    """A decision vector with closed gaps (a rollout of random controls) and random slacks."""
+    n = config.horizon
+    controls = rng.uniform(-1, 1, size=(n, 2))
+    states = [rng.uniform(-2, 2, size=3)]
+    for u in controls:
+        states.append(step(states[-1], u, config.tau_s))
+    plan = Plan(np.array(states), controls, rng.uniform(0, 1, n), rng.uniform(0, 1, n))
+    return plan.to_vector(layout_for(config))
+
+
+def _parameters(config: NMPCConfig, state: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    n, slots = config.horizon, config.obstacle_slots
+    return OCPParameters(
+        state,
+        rng.uniform(-3, 3, size=(n + 1, 3)),
+        rng.uniform(-1, 1, size=(n, 2)),
+        rng.uniform(-3, 3, size=(slots, n + 1, 2)),
+        rng.uniform(0.2, 0.6, size=slots),
+    ).to_vector()
+
+
+@pytest.mark.parametrize("variant", ["bt", "cbf", "relax-cbf"])
+def test_stagewise_rows_equal_the_declared_rows_on_the_feasible_set(variant: str) -> None:
+    config = NMPCConfig(safety=variant, horizon=4, obstacle_slots=2)
+    nlp = paper_nlp(config)
+    lbx, ubx, lbg, ubg = nlp.bounds
+    stagewise = transcribe(nlp.problem, lbg, ubg, nlp.stages)
+    declared = ca.Function("g", [nlp.problem["x"], nlp.problem["p"]], [nlp.problem["g"]])
+    reordered = ca.Function("g_s", [stagewise.nlp["x"], stagewise.nlp["p"]], [stagewise.nlp["g"]])
+    rng = np.random.default_rng(3)
+    for _ in range(5):
+        w = _feasible_point(config, rng)
+        p = _parameters(config, w[:3], rng)
+        g = np.asarray(declared(w, p)).ravel()
+        g_s = np.asarray(reordered(stagewise.to_stage_order(w), p)).ravel()
+        assert np.allclose(g_s, g[stagewise.rows], atol=1e-9, rtol=1e-12)
+    assert sorted(stagewise.rows.tolist()) == list(range(g.size))
+
+
+def test_stagewise_rows_read_only_their_stage() -> None:
+    """Every row of stage k reads only x_k, u_k (and x_(k+1) in the dynamics gaps)."""
+    config = NMPCConfig(safety="relax-cbf", horizon=3, obstacle_slots=1)
+    nlp = paper_nlp(config)
+    stagewise = transcribe(nlp.problem, *nlp.bounds[2:], nlp.stages)
+    stage_of = np.empty(stagewise.order.size, dtype=int)
+    for k, (x, u) in enumerate(zip(nlp.stages.states, [*nlp.stages.controls, ()], strict=True)):
+        for i in (*x, *u):
+            stage_of[np.flatnonzero(stagewise.order == i)[0]] = k
+    rows, cols = ca.jacobian_sparsity(stagewise.nlp["g"], stagewise.nlp["x"]).get_triplet()
+    for r in set(rows):
+        stages = {int(stage_of[c]) for rr, c in zip(rows, cols, strict=True) if rr == r}
+        assert max(stages) - min(stages) <= 1, (r, stages)
+
+
+def test_a_row_across_two_stages_is_refused() -> None:
+    x = ca.SX.sym("x", 3)  # x_0, x_1, x_2 (scalar states), no controls' effect on x_2 - x_0
+    u = ca.SX.sym("u", 2)
+    w = ca.vertcat(x[0], u[0], x[1], u[1], x[2])
+    g = ca.vertcat(x[1] - (x[0] + u[0]), x[2] - (x[1] + u[1]), x[2] - x[0])
+    stages = StageIndices(((0,), (2,), (4,)), ((1,), (3,)))
+    with pytest.raises(NotStagewiseError, match="constraint row 2"):
+        transcribe({"x": w, "p": ca.SX.sym("p", 0), "f": ca.sumsqr(u), "g": g}, [0, 0, 0], [0, 0, 1], stages)
+
+
+def test_husky_cbf_problems_are_stagewise() -> None:
+    config = load_scenario("head_on_moving_obstacle").husky_cbf_config(5, None)
+    for soft in (False, True):
+        problem = build_problem(config, 5, config.slots, soft)
+        stagewise = transcribe(problem.nlp.problem, *problem.nlp.bounds[2:], problem.nlp.stages)
+        assert stagewise.nlp["g"].numel() == problem.nlp.problem["g"].numel()
+
+
+def _one_problem() -> tuple[NMPCConfig, np.ndarray, np.ndarray]:
+    """A relax-cbf problem with an obstacle on the way, as the closed loop poses it."""
+    config = NMPCConfig(safety="relax-cbf", horizon=5, solver=SolverOptions(backend="ipopt"))
+    controller = NMPCController(config)
+    recorded: list[tuple[np.ndarray, np.ndarray]] = []
+    controller.on_solve = lambda p, guess: recorded.append((p, guess))
+    start, goal = np.array([0.0, 0.0, math.pi / 2]), SetPoint(0.0, 4.0, math.pi / 2)
+    controller.solve(start, goal, [Obstacle(0.1, 2.0, 0.5)], 0.0)
+    return config, *recorded[0]
+
+
+def test_fatrop_answers_like_ipopt() -> None:
+    config, p, guess = _one_problem()
+    reference = IpoptSolver(paper_nlp(config), SolverOptions()).solve(p, guess)
+    raw = FatropSolver(paper_nlp(config), SolverOptions()).solve(p, guess)
+    assert raw.success and raw.solver == "fatrop" and not raw.fallback_reason
+    assert np.max(np.abs(raw.decision - reference.decision)) < 1e-4
+
+
+def test_fatrop_failures_fall_back_to_ipopt_and_say_why() -> None:
+    """A solver error (what the compiled FATROP raises on its iteration cap) and an answer that
+    violates the constraints are both handed to IPOPT, which answers the same problem."""
+    config, p, guess = _one_problem()
+    reference = IpoptSolver(paper_nlp(config), SolverOptions()).solve(p, guess)
+    solver = FatropSolver(paper_nlp(config), SolverOptions())
+
+    def fails(**_: object) -> None:
+        raise RuntimeError("Evaluation failed")
+
+    solver._function = fails
+    raw = solver.solve(p, guess)
+    assert raw.success and raw.solver == "ipopt"
+    assert raw.fallback_reason == "fatrop: did not converge (iteration cap or solver error)"
+    assert np.max(np.abs(raw.decision - reference.decision)) < 1e-6
+
+    solver = FatropSolver(paper_nlp(config), SolverOptions())
+    stagewise = solver._stagewise
+    infeasible = stagewise.to_stage_order(guess)
+    g = ca.Function("g", [stagewise.nlp["x"], stagewise.nlp["p"]], [stagewise.nlp["g"]])
+    solver._function = lambda **_: {"x": infeasible, "g": g(infeasible, p)}
+    raw = solver.solve(p, guess)
+    assert raw.solver == "ipopt" and raw.fallback_reason.startswith("fatrop: constraint check")
+
+
+def test_compiled_solver_is_cached_and_reused(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setenv("HUSKY_SIM_SOLVER_CACHE", str(tmp_path))
+    x = ca.SX.sym("x", 2)
+    function = ca.Function("cache_probe", [x], [ca.sumsqr(x) + ca.sin(x[0])])
+    first = compiled(function)
+    assert cache_dir() == tmp_path and len(list(tmp_path.glob("cache_probe_*.so"))) == 1
+    monkeypatch.setenv("CC", "no-such-compiler")  # a cache hit needs no compiler
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        again = compiled(function)
+    assert float(again([0.3, -0.2])) == pytest.approx(float(function([0.3, -0.2])), abs=1e-15)
+    assert float(first([1.0, 2.0])) == pytest.approx(float(function([1.0, 2.0])), abs=1e-15)
+
+
+def test_without_a_compiler_the_function_runs_uncompiled(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.setenv("HUSKY_SIM_SOLVER_CACHE", str(tmp_path))
+    monkeypatch.setenv("CC", "no-such-compiler")
+    monkeypatch.setattr(compiled_module, "_warned", set())
+    x = ca.SX.sym("x")
+    function = ca.Function("no_compiler_probe", [x], [2 * x])
+    with pytest.warns(RuntimeWarning, match="no C compiler"):
+        result = compiled(function)
+    assert result is function and not list(tmp_path.glob("*.so"))
+
+
+def test_nlp_names_its_solver_problem() -> None:
+    nlp = paper_nlp(NMPCConfig())
+    assert isinstance(nlp, NLP) and nlp.name == "nmpc"
