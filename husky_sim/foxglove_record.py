@@ -34,16 +34,8 @@ _ODOM, _BASE = "odom", "base_link"
 #: the log's velocity columns: commanded, drive-limited and measured v (m/s) and omega (rad/s)
 _CONTROL_FIELDS = tuple(c for c in LOG_COLUMNS if c.startswith(("v_", "omega_")))
 _SAFETY_FIELDS = ("clearance_m", "s_h_min", "s_v_max", "safety_active", "solve_ms")
-_SAFETY_TEXT = (
-    "status",
-    "solver",
-    "solver_fallback",
-    "fallback",
-    "recovered_by",
-    "soft_constraint",
-    "guided",
-    "deadline_miss",
-)
+#: the log's per-step verdict columns, from the solver's status to a missed deadline
+_SAFETY_TEXT = LOG_COLUMNS[LOG_COLUMNS.index("status") : LOG_COLUMNS.index("deadline_miss") + 1]
 
 
 def _json_schema(name: str, numbers: Sequence[str], texts: Sequence[str] = ()) -> foxglove.Schema:

@@ -32,6 +32,7 @@ from controllers import (
     Reference,
     SafetyConstraint,
     SetPoint,
+    SolverOptions,
 )
 from controllers.husky_cbf import Footprint, HuskyCBFConfig, HuskyCBFController, RobotResponse
 from husky_sim.drive import DriveConfig
@@ -304,6 +305,8 @@ class ControllerSpec(_Strict):
     v_max_mps: _real(0.0, 5.0, "m/s", lo_open=True) = 1.0
     omega_max_radps: _real(0.0, 10.0, "rad/s", lo_open=True) = math.pi / 4
     obstacle_prediction: Literal["constant-velocity", "frozen"] = "constant-velocity"
+    #: NLP solver (controllers.backends); omitted: the controllers' default (SolverOptions)
+    solver: Literal["ipopt", "fatrop"] | None = None
 
 
 class DriveSpec(_Strict):
@@ -447,9 +450,12 @@ class Scenario(_Strict):
     def controller_config(
         self, safety: SafetyConstraint, horizon: int | None = None, gamma: float | None = None
     ) -> NMPCConfig:
-        # ControllerSpec's fields are NMPCConfig's fields by name
+        # ControllerSpec's fields are NMPCConfig's fields by name; `solver` names SolverOptions.backend
         fields = self.controller.model_dump()
         fields.update(horizon=horizon or fields["horizon"], gamma=fields["gamma"] if gamma is None else gamma)
+        backend = fields.pop("solver")
+        if backend is not None:
+            fields["solver"] = SolverOptions(backend=backend)
         return NMPCConfig(
             **fields,
             tau_s=self.tau_s,

@@ -169,3 +169,18 @@ def test_without_a_compiler_the_function_runs_uncompiled(
 def test_nlp_names_its_solver_problem() -> None:
     nlp = paper_nlp(NMPCConfig())
     assert isinstance(nlp, NLP) and nlp.name == "nmpc"
+
+
+def test_a_scenario_file_chooses_the_solver() -> None:
+    """`controller.solver` in a scenario picks the backend for the paper's controllers and husky-cbf."""
+    from husky_sim.scenario import scenario_from_data
+
+    data = load_scenario("head_on_moving_obstacle").model_dump(mode="json")
+    assert load_scenario("head_on_moving_obstacle").controller_config("cbf").solver.backend == "ipopt"
+    data["controller"]["solver"] = "fatrop"
+    scenario = scenario_from_data(data)
+    assert scenario.controller_config("cbf").solver.backend == "fatrop"
+    assert scenario.husky_cbf_config(5).nmpc.solver.backend == "fatrop"
+    data["controller"]["solver"] = "hpipm"
+    with pytest.raises(ValueError, match="solver"):
+        scenario_from_data(data)
