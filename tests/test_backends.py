@@ -134,7 +134,7 @@ def test_fatrop_failures_fall_back_to_ipopt_and_say_why() -> None:
     stagewise = solver._stagewise
     infeasible = stagewise.to_stage_order(guess)
     g = ca.Function("g", [stagewise.nlp["x"], stagewise.nlp["p"]], [stagewise.nlp["g"]])
-    solver._function = lambda **_: {"x": infeasible, "g": g(infeasible, p)}
+    solver._function = lambda **_: {"x": ca.DM(infeasible), "g": g(infeasible, p)}
     raw = solver.solve(p, guess)
     assert raw.solver == "ipopt" and raw.fallback_reason.startswith("fatrop: constraint check")
 

@@ -57,10 +57,15 @@ class FatropSolver:
         self._nlp, self._options = nlp, options
         lbx, ubx, lbg, ubg = nlp.bounds
         self._stagewise = stagewise = transcribe(nlp.problem, lbg, ubg, nlp.stages)
-        self._lbx = stagewise.to_stage_order(lbx)
-        self._ubx = stagewise.to_stage_order(ubx)
-        self._lbg = stagewise.rows_to_stage_order(lbg)
-        self._ubg = stagewise.rows_to_stage_order(ubg)
+        lbx, ubx = stagewise.to_stage_order(lbx), stagewise.to_stage_order(ubx)
+        lbg, ubg = stagewise.rows_to_stage_order(lbg), stagewise.rows_to_stage_order(ubg)
+        # the bounds as CasADi passes them (converted once, not on every call) and, for the
+        # constraint check, only the finite ones: (indices, values) per side
+        self._bounds = {k: ca.DM(v) for k, v in (("lbx", lbx), ("ubx", ubx), ("lbg", lbg), ("ubg", ubg))}
+        self._finite = {
+            k: (np.flatnonzero(np.isfinite(v)), v[np.isfinite(v)])
+            for k, v in (("lbx", lbx), ("ubx", ubx), ("lbg", lbg), ("ubg", ubg))
+        }
         solver = ca.nlpsol(nlp.name, "fatrop", stagewise.nlp, fatrop_options(options, stagewise.equality))
         self._function = compiled(solver)
         self._reference: IpoptSolver | None = None
@@ -68,17 +73,16 @@ class FatropSolver:
     def reset(self) -> None:
         """Nothing is carried between solves but the guess."""
 
-    def _refused(self, out: dict[str, ca.DM]) -> str:
-        """Why a returned FATROP solution is not accepted ("" if it is)."""
-        x = np.asarray(out["x"], dtype=float).reshape(-1)
-        g = np.asarray(out["g"], dtype=float).reshape(-1)
-        if not (np.all(np.isfinite(x)) and np.all(np.isfinite(g))):
+    def _refused(self, x: np.ndarray, g: np.ndarray) -> str:
+        """Why a returned FATROP solution (x, g in stage order) is not accepted ("" if it is)."""
+        if not (np.isfinite(x).all() and np.isfinite(g).all()):
             return "non-finite solution"
+        f = self._finite
         violation = max(
-            float(np.max(self._lbg - g, initial=0.0)),
-            float(np.max(g - self._ubg, initial=0.0)),
-            float(np.max(self._lbx - x, initial=0.0)),
-            float(np.max(x - self._ubx, initial=0.0)),
+            np.max(f["lbg"][1] - g[f["lbg"][0]], initial=0.0),
+            np.max(g[f["ubg"][0]] - f["ubg"][1], initial=0.0),
+            np.max(f["lbx"][1] - x[f["lbx"][0]], initial=0.0),
+            np.max(x[f["ubx"][0]] - f["ubx"][1], initial=0.0),
         )
         if violation > CONSTRAINT_CHECK_TOL:
             return f"constraint check: violation {violation:.2g}"
@@ -87,21 +91,14 @@ class FatropSolver:
     def solve(self, parameters: np.ndarray, guess: np.ndarray) -> RawSolution:
         stagewise = self._stagewise
         try:
-            out = self._function(
-                x0=stagewise.to_stage_order(guess),
-                p=parameters,
-                lbx=self._lbx,
-                ubx=self._ubx,
-                lbg=self._lbg,
-                ubg=self._ubg,
-            )
+            out = self._function(x0=stagewise.to_stage_order(guess), p=parameters, **self._bounds)
         except RuntimeError:
             reason = "did not converge (iteration cap or solver error)"
         else:
-            reason = self._refused(out)
+            x, g = out["x"].full().ravel(), out["g"].full().ravel()
+            reason = self._refused(x, g)
             if not reason:
-                decision = stagewise.from_stage_order(np.asarray(out["x"], dtype=float))
-                return RawSolution(decision, True, "Solve_Succeeded", -1, self.name)
+                return RawSolution(stagewise.from_stage_order(x), True, "Solve_Succeeded", -1, self.name)
         if self._reference is None:
             self._reference = IpoptSolver(self._nlp, self._options)
         self._reference.reset()
