@@ -127,14 +127,13 @@ class NMPCController:
             return self._result_without_plan(state, n_real, ignored, start, "invalid state")
         params = self._parameters(state, reference, obstacles, t)
         guess = self._initial_guess(state, params)
-        p_vec = params.to_vector()
+        p_vec, guess_vector = params.to_vector(), guess.to_vector(self._layout)
         if self.on_solve is not None:
-            self.on_solve(p_vec, guess.to_vector(self._layout))
+            self.on_solve(p_vec, guess_vector)
         with deliver_after_solve():  # an interrupt is delivered, never taken for a failed solve
             try:
-                raw = self._backend.solve(p_vec, guess.to_vector(self._layout))
+                raw = self._backend.solve(p_vec, guess_vector)
             except Exception as exc:  # noqa: BLE001 - a control loop must survive any solver error
-                guess_vector = guess.to_vector(self._layout)
                 raw = RawSolution(guess_vector, False, f"exception: {exc}", -1, self.backend_name)
         recovered_by = ""
         if not raw.success:
