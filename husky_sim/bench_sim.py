@@ -10,7 +10,8 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from controllers import NMPCConfig, NMPCController, SetPoint
+from controllers import NMPCConfig, NMPCController, SetPoint, SolverOptions
+from controllers.config import SolverBackend
 from husky_sim.collision import ClearanceMonitor
 from husky_sim.drive import DriveConfig, SkidSteerDrive
 from husky_sim.episode import EpisodeConfig, Outcomes, run_episode
@@ -129,7 +130,10 @@ def drive_table(frictions: tuple[float, ...] = (1.0, 0.5)) -> str:
     return "\n".join(lines)
 
 
-def run_sim_bench(duration_s: float = 30.0, stepping_steps: int = 7200) -> SimBench:
+def run_sim_bench(
+    duration_s: float = 30.0, stepping_steps: int = 7200, solver: SolverBackend | None = None
+) -> SimBench:
+    """The benchmark episode (with `solver`'s NLP backend; None: the default) and bare stepping."""
     start = (0.0, 0.0, math.pi / 2)
     config = EpisodeConfig(
         start=start,
@@ -138,9 +142,10 @@ def run_sim_bench(duration_s: float = 30.0, stepping_steps: int = 7200) -> SimBe
         world=WorldConfig(obstacles=BENCH_OBSTACLES),
         outcomes=Outcomes(stop_early=False, stop_on_collision=False),
     )
-    nmpc = NMPCController(
-        NMPCConfig(safety="relax-cbf", horizon=5, gamma=0.1, robot_radius_m=0.65, obstacle_slots=8)
-    )
+    nmpc_config = NMPCConfig(safety="relax-cbf", horizon=5, gamma=0.1, robot_radius_m=0.65, obstacle_slots=8)
+    if solver is not None:
+        nmpc_config = nmpc_config.with_(solver=SolverOptions(backend=solver))
+    nmpc = NMPCController(nmpc_config)
     t0 = time.perf_counter()
     result = run_episode(nmpc, SetPoint(0.0, 10.0, math.pi / 2), config, robot_radius_m=0.65)
     episode_wall = time.perf_counter() - t0

@@ -98,7 +98,7 @@ def _cmd_bench(args: argparse.Namespace) -> int:
 def _cmd_bench_sim(args: argparse.Namespace) -> int:
     from husky_sim.bench_sim import run_sim_bench
 
-    print(run_sim_bench(duration_s=args.duration).report())
+    print(run_sim_bench(duration_s=args.duration, solver=args.solver).report())
     if args.drive_table:
         from husky_sim.bench_sim import drive_table
 
@@ -566,6 +566,12 @@ def build_parser() -> argparse.ArgumentParser:
         type=_number_in(float, 0.1, 600.0),
         default=30.0,
         help="episode length in s, 0.1 to 600 (default 30)",
+    )
+    bench_sim.add_argument(
+        "--solver",
+        choices=SOLVER_CHOICES[:2],
+        default=None,
+        help="NLP backend of the episode (default: SolverOptions.backend)",
     )
     bench_sim.add_argument(
         "--drive-table", action="store_true", help="also print achieved vs commanded v and omega"

@@ -71,6 +71,7 @@ def test_bench_table_has_ratio(capsys: pytest.CaptureFixture[str]) -> None:
         ["bench", "--variants", "mode3"],
         ["bench", "--obstacles", "9"],
         ["bench", "--solvers", "hpipm"],
+        ["bench-sim", "--solver", "opti"],
     ],
 )
 def test_bench_bad_input_exits_2(argv: list[str], capsys: pytest.CaptureFixture[str]) -> None:
