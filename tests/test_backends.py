@@ -184,3 +184,13 @@ def test_a_scenario_file_chooses_the_solver() -> None:
     data["controller"]["solver"] = "hpipm"
     with pytest.raises(ValueError, match="solver"):
         scenario_from_data(data)
+
+
+def test_dynamics_with_a_parameter_on_the_next_state_are_refused_not_crashed() -> None:
+    """x_(k+1) must have a unit coefficient in its dynamics row; p x_1 = x_0 + u_0 is no gap."""
+    x, u, p = ca.SX.sym("x", 2), ca.SX.sym("u"), ca.SX.sym("p")
+    w = ca.vertcat(x[0], u, x[1])
+    stages = StageIndices(((0,), (2,)), ((1,),))
+    problem = {"x": w, "p": p, "f": ca.sumsqr(w), "g": p * x[1] - (x[0] + u)}
+    with pytest.raises(NotStagewiseError, match="stage 0: found gap rows"):
+        transcribe(problem, [0], [0], stages)

@@ -166,7 +166,7 @@ def _is_gap(row: ca.SX, w: ca.SX, next_state: Sequence[int]) -> bool:
     """Whether `row` is x_{k+1}[c] - F_c(x_k, u_k): affine in x_{k+1} with one unit coefficient."""
     x_next = ca.vertcat(*[w[i] for i in next_state])
     jac = ca.jacobian(row, x_next)
-    if ca.depends_on(jac, w):
+    if not jac.is_constant():  # depends on decisions or parameters: not a plain x_(k+1) - F row
         return False
     coeffs = np.asarray(ca.evalf(jac), dtype=float).reshape(-1)
     return int(np.sum(coeffs != 0.0)) == 1 and float(np.max(coeffs)) == 1.0
