@@ -136,9 +136,11 @@ class NMPCController:
             except Exception as exc:  # noqa: BLE001 - a control loop must survive any solver error
                 raw = RawSolution(guess_vector, False, f"exception: {exc}", -1, self.backend_name)
         recovered_by = ""
+        solver_fallbacks = [raw.fallback_reason]  # the first solve's, kept when a retry answers
         if not raw.success:
             retry, recovered_by = self._retry(state, params, p_vec)
             raw = retry or raw
+            solver_fallbacks.append(raw.fallback_reason)
         if raw.success:
             plan, fallback = Plan.from_vector(raw.decision, self._layout), "none"
             self._plan, self._plan_age = plan, 0
@@ -168,7 +170,7 @@ class NMPCController:
             obstacles_ignored=ignored,
             recovered_by=recovered_by,
             solver=raw.solver,
-            solver_fallback=raw.fallback_reason,
+            solver_fallback="; ".join(r for r in dict.fromkeys(solver_fallbacks) if r),
         )
 
     def _retry(

@@ -209,11 +209,12 @@ class HuskyCBFController:
     def _solve(
         self, solver: FatropSolver | IpoptSolver, layout: Layout, p: np.ndarray, guess: ExtendedPlan
     ) -> RawSolution:
+        guess_vector = guess.to_vector(layout)
         with deliver_after_solve():  # an interrupt is delivered, never taken for a failed solve
             try:
-                raw = solver.solve(p, guess.to_vector(layout))
+                raw = solver.solve(p, guess_vector)
             except Exception as exc:  # noqa: BLE001 - a control loop must survive any solver error
-                return RawSolution(guess.to_vector(layout), False, f"exception: {exc}", -1, solver.name)
+                return RawSolution(guess_vector, False, f"exception: {exc}", -1, solver.name)
         if raw.fallback_reason:
             self._solver_fallbacks.append(raw.fallback_reason)
         return raw
