@@ -23,7 +23,7 @@ SAFETY_CONSTRAINTS: tuple[SafetyConstraint, ...] = ("none", "bt", "cbf", "relax-
 CONTROLLER_NAMES: tuple[str, ...] = (*SAFETY_CONSTRAINTS, "husky-cbf")
 
 SolverBackend = Literal["fatrop", "ipopt", "opti"]
-#: NLP solvers (controllers.backends): structured FATROP, reference IPOPT (default), naive Opti.
+#: NLP solvers (controllers.backends): structured FATROP (default), reference IPOPT, naive Opti.
 SOLVER_BACKENDS: tuple[SolverBackend, ...] = ("fatrop", "ipopt", "opti")
 
 ObstaclePrediction = Literal["constant-velocity", "frozen"]
@@ -62,7 +62,7 @@ class SolverOptions:
     """Which NLP solver and its settings; a tight constraint tolerance so that plans satisfy
     their constraints to 1e-6 (IPOPT 1e-8; FATROP's solutions are checked to 1e-6)."""
 
-    backend: SolverBackend = "ipopt"  # fatrop: faster, not yet the default (controllers.backends.fatrop)
+    backend: SolverBackend = "fatrop"  # ipopt: the reference, and FATROP's fallback
     max_iter: int = 200
     tol: float = 1e-6  # IPOPT's overall (scaled) optimality tolerance
     acceptable_tol: float = 1e-6

@@ -9,6 +9,7 @@ from pathlib import Path
 import numpy as np
 
 from controllers import NMPCConfig, NMPCController
+from controllers.config import SolverOptions
 from husky_sim.kinematic import run_kinematic
 from husky_sim.scenarios_kinematic import CLUTTERED_POINT_STABILISATION, PAPER_POINT_STABILISATION
 
@@ -30,6 +31,7 @@ def run_case(problem: str, variant: str, horizon: int) -> dict[str, np.ndarray]:
         horizon=horizon,
         robot_radius_m=p.robot_radius_m,
         obstacle_slots=len(p.obstacles),
+        solver=SolverOptions(backend="ipopt"),  # the reference backend the outputs were pinned with
     )
     ep = run_kinematic(
         NMPCController(cfg), p.start, p.reference, p.obstacles, cfg.tau_s, DURATION_S, p.robot_radius_m

@@ -2,6 +2,7 @@
 its failures fall back to IPOPT and are reported, and compiled solvers are cached and reused."""
 
 import math
+import re
 import warnings
 from pathlib import Path
 
@@ -12,7 +13,7 @@ import pytest
 from controllers import NMPCConfig, NMPCController, Obstacle, SetPoint
 from controllers.backends import FatropSolver, IpoptSolver
 from controllers.backends import compiled as compiled_module
-from controllers.backends.compiled import cache_dir, compiled
+from controllers.backends.compiled import FATROP_RETURN_FLAGS, cache_dir, compiled
 from controllers.backends.nlp import NLP
 from controllers.backends.stagewise import NotStagewiseError, StageIndices, transcribe
 from controllers.config import SolverOptions
@@ -115,10 +116,16 @@ def test_fatrop_answers_like_ipopt() -> None:
 
 
 def test_fatrop_failures_fall_back_to_ipopt_and_say_why() -> None:
-    """A solver error (what the compiled FATROP raises on its iteration cap) and an answer that
-    violates the constraints are both handed to IPOPT, which answers the same problem."""
+    """A real FATROP exit that is not accepted (its iteration cap, read through the status shim),
+    a solver error and an answer that violates the constraints are all handed to IPOPT, which
+    answers the same problem, and the fallback names FATROP's exit."""
     config, p, guess = _one_problem()
     reference = IpoptSolver(paper_nlp(config), SolverOptions()).solve(p, guess)
+
+    capped = FatropSolver(paper_nlp(config), SolverOptions(max_iter=2)).solve(p, guess)
+    assert capped.solver == "ipopt"  # IPOPT runs under the same cap, so it need not converge
+    assert capped.fallback_reason.startswith("fatrop: MaxIterExceeded after ")
+
     solver = FatropSolver(paper_nlp(config), SolverOptions())
 
     def fails(**_: object) -> None:
@@ -126,8 +133,7 @@ def test_fatrop_failures_fall_back_to_ipopt_and_say_why() -> None:
 
     solver._function = fails
     raw = solver.solve(p, guess)
-    assert raw.success and raw.solver == "ipopt"
-    assert raw.fallback_reason == "fatrop: did not converge (iteration cap or solver error)"
+    assert raw.success and raw.solver == "ipopt" and raw.fallback_reason == "fatrop: solver error"
     assert np.max(np.abs(raw.decision - reference.decision)) < 1e-6
 
     solver = FatropSolver(paper_nlp(config), SolverOptions())
@@ -137,6 +143,38 @@ def test_fatrop_failures_fall_back_to_ipopt_and_say_why() -> None:
     solver._function = lambda **_: {"x": ca.DM(infeasible), "g": g(infeasible, p)}
     raw = solver.solve(p, guess)
     assert raw.solver == "ipopt" and raw.fallback_reason.startswith("fatrop: constraint check")
+
+
+def test_fatrop_never_sees_non_finite_data() -> None:
+    """FATROP does not check its inputs (a NaN made it spin without end): a NaN parameter goes
+    straight to IPOPT, which reports the invalid number as a failed solve."""
+    config, p, guess = _one_problem()
+    broken = p.copy()
+    broken[0] = np.nan
+    raw = FatropSolver(paper_nlp(config), SolverOptions()).solve(broken, guess)
+    assert raw.fallback_reason == "fatrop: non-finite parameters or guess" and not raw.success
+
+
+def test_fatrop_reports_its_exit_and_iterations() -> None:
+    """The compiled solver's status shim gives FATROP's own exit flag and iteration count."""
+    config, p, guess = _one_problem()
+    raw = FatropSolver(paper_nlp(config), SolverOptions()).solve(p, guess)
+    assert raw.solver == "fatrop" and raw.status in ("Solve_Succeeded", "Solved_To_Acceptable_Level")
+    assert 1 <= raw.iterations < SolverOptions().max_iter
+
+
+def test_fatrop_exit_names_match_the_shipped_header() -> None:
+    """The shim reports FATROP's enum by position: its names must be the header's, in order."""
+    header = Path(ca.__file__).parent / "include" / "fatrop" / "ip_algorithm" / "ip_algorithm.hpp"
+    body = re.search(r"enum class IpSolverReturnFlag\s*\{(.*?)\}", header.read_text(), re.S)
+    assert body is not None, f"no IpSolverReturnFlag in {header}"
+    names = re.findall(r"^\s*(\w+)\s*,?", re.sub(r"//[^\n]*", "", body.group(1)), re.M)
+    assert tuple(names) == FATROP_RETURN_FLAGS
+
+
+def test_fatrop_is_the_default_backend() -> None:
+    assert SolverOptions().backend == "fatrop"
+    assert NMPCController(NMPCConfig()).backend_name == "fatrop"
 
 
 def test_compiled_solver_is_cached_and_reused(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
@@ -166,6 +204,22 @@ def test_without_a_compiler_the_function_runs_uncompiled(
     assert result is function and not list(tmp_path.glob("*.so"))
 
 
+def test_fatrop_without_a_compiler_still_answers(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Uncompiled, FATROP's exit flag is not visible: a converged solve is used, anything else
+    goes to IPOPT; either way the answer is the problem's."""
+    monkeypatch.setenv("HUSKY_SIM_SOLVER_CACHE", str(tmp_path))
+    monkeypatch.setenv("CC", "no-such-compiler")
+    monkeypatch.setattr(compiled_module, "_warned", set())
+    config, p, guess = _one_problem()
+    reference = IpoptSolver(paper_nlp(config), SolverOptions()).solve(p, guess)
+    with pytest.warns(RuntimeWarning, match="no C compiler"):
+        solver = FatropSolver(paper_nlp(config), SolverOptions())
+    raw = solver.solve(p, guess)
+    assert raw.success and raw.solver in ("fatrop", "ipopt") and not list(tmp_path.glob("*.so"))
+    assert raw.solver == "fatrop" or raw.fallback_reason == "fatrop: did not converge (uncompiled)"
+    assert np.max(np.abs(raw.decision - reference.decision)) < 1e-4
+
+
 def test_nlp_names_its_solver_problem() -> None:
     nlp = paper_nlp(NMPCConfig())
     assert isinstance(nlp, NLP) and nlp.name == "nmpc"
@@ -176,11 +230,11 @@ def test_a_scenario_file_chooses_the_solver() -> None:
     from husky_sim.scenario import scenario_from_data
 
     data = load_scenario("head_on_moving_obstacle").model_dump(mode="json")
-    assert load_scenario("head_on_moving_obstacle").controller_config("cbf").solver.backend == "ipopt"
-    data["controller"]["solver"] = "fatrop"
+    assert load_scenario("head_on_moving_obstacle").controller_config("cbf").solver.backend == "fatrop"
+    data["controller"]["solver"] = "ipopt"
     scenario = scenario_from_data(data)
-    assert scenario.controller_config("cbf").solver.backend == "fatrop"
-    assert scenario.husky_cbf_config(5).nmpc.solver.backend == "fatrop"
+    assert scenario.controller_config("cbf").solver.backend == "ipopt"
+    assert scenario.husky_cbf_config(5).nmpc.solver.backend == "ipopt"
     data["controller"]["solver"] = "hpipm"
     with pytest.raises(ValueError, match="solver"):
         scenario_from_data(data)

@@ -49,10 +49,11 @@ def test_bench_json_records(capsys: pytest.CaptureFixture[str]) -> None:
         assert 0 < rec["median_ms"] <= rec["p95_ms"] <= rec["p99_ms"] <= rec["max_ms"]
         assert 0 < rec["cpu_median_ms"] <= rec["cpu_p99_ms"]
         assert rec["fallbacks"] == 0
+        assert rec["default"] == (rec["solver"] == "fatrop")
         if rec["solver"] == "ipopt":
-            assert rec["default"] and rec["first_control_diff_p99"] is None
+            assert rec["first_control_diff_p99"] is None
         else:
-            assert not rec["default"] and 0 <= rec["first_control_diff_p99"] < 1e-4
+            assert 0 <= rec["first_control_diff_p99"] < 1e-4
     assert {rec["solver"] for rec in records} == {"fatrop", "ipopt", "opti"}
 
 

@@ -7,12 +7,18 @@ file lock makes concurrent workers wait for the one that compiles instead of com
 Without a C compiler, or when compiling fails, the uncompiled Function is used and one warning
 says so; results are the same, only slower.
 
+A FATROP solver is compiled with a status shim (FATROP_STATUS_SHIM): its call of
+`fatrop_ocp_c_solve` goes through a wrapper that keeps FATROP's own return flag and iteration
+count (read with `FatropStatus`) and returns 0 unless FATROP raised, so the iterate is always
+written out and the caller, not CasADi's collapsed 0/1 status, decides what to accept.
+
 Cache directory: $HUSKY_SIM_SOLVER_CACHE, else $XDG_CACHE_HOME/husky-nav-sim/solvers, else
 ~/.cache/husky-nav-sim/solvers.
 """
 
 from __future__ import annotations
 
+import ctypes
 import fcntl
 import hashlib
 import os
@@ -29,7 +35,40 @@ import casadi as ca
 #: against 40 s at -O2 (6.6 s at -O0).
 C_FLAGS = ("-O1", "-shared", "-fPIC")
 
+#: A compile that takes longer is abandoned (the solver then runs uncompiled); the largest
+#: problem here (husky-cbf N = 12, soft) compiles in about 16 s.
+COMPILE_TIMEOUT_S = 600.0
+
 _warned: set[str] = set()
+
+#: FATROP's return flags as the shim reports them: fatrop::IpSolverReturnFlag in the order of the
+#: header that ships in the CasADi wheel (casadi/include/fatrop/ip_algorithm/ip_algorithm.hpp).
+FATROP_RETURN_FLAGS = (
+    "Success",
+    "MaxIterExceeded",
+    "StopAtAcceptablePoint",
+    "LocalInfeasibility",
+    "LineSearchFailed",
+    "ErrorInStepComputation",
+    "Unknown",
+)
+#: The generated solver's call of fatrop_ocp_c_solve is renamed to the shim's wrapper.
+_SHIM_DEFINE = "-Dfatrop_ocp_c_solve=husky_fatrop_ocp_c_solve"
+FATROP_STATUS_SHIM = r"""
+/* husky-nav-sim: keep FATROP's own return flag; see controllers/backends/compiled.py */
+#undef fatrop_ocp_c_solve
+#include <fatrop/ocp/OCPCInterface.h>
+static _Thread_local int husky_flag = -1, husky_iterations = -1;
+fatrop_int husky_fatrop_ocp_c_solve(struct FatropOcpCSolver* s) {
+  fatrop_int ret = fatrop_ocp_c_solve(s);
+  const struct FatropOcpCStats* stats = fatrop_ocp_c_get_stats(s);
+  husky_flag = ret == -1 ? -1 : stats->return_flag;
+  husky_iterations = stats->iterations_count;
+  return ret == -1 ? -1 : 0;
+}
+int husky_fatrop_last_flag(void) { return husky_flag; }
+int husky_fatrop_last_iterations(void) { return husky_iterations; }
+"""
 
 
 def cache_dir() -> Path:
@@ -49,12 +88,14 @@ def _compiler() -> str | None:
     return shutil.which("cc") or shutil.which("gcc")
 
 
-def _compile_command(compiler: str, source: Path, target: Path) -> list[str]:
+def _compile_command(compiler: str, sources: list[Path], target: Path) -> list[str]:
     casadi_dir = Path(ca.__file__).parent
+    shim = [_SHIM_DEFINE] if len(sources) > 1 else []
     return [
         compiler,
         *C_FLAGS,
-        str(source),
+        *shim,
+        *map(str, sources),
         f"-I{casadi_dir / 'include'}",
         f"-L{casadi_dir}",
         "-lfatrop",
@@ -71,25 +112,27 @@ def _warn_once(message: str) -> None:
         warnings.warn(message, RuntimeWarning, stacklevel=3)
 
 
-def _generate(function: ca.Function, directory: str) -> Path:
-    """Write `function` as C into `directory` (CodeGenerator writes into the working directory)."""
-    source_name = f"{function.name()}.c"
-    generator = ca.CodeGenerator(source_name, {"with_header": False})
+def _generate(function: ca.Function, directory: str) -> list[Path]:
+    """Write `function` as C into `directory`, plus the status shim if it calls FATROP."""
+    name = function.name()
+    generator = ca.CodeGenerator(f"{name}.c", {"with_header": False})
     generator.add(function)
-    cwd = os.getcwd()
-    try:
-        os.chdir(directory)
-        generator.generate()
-    finally:
-        os.chdir(cwd)
-    return Path(directory) / source_name
+    generator.generate(f"{directory}/")
+    sources = [Path(directory) / f"{name}.c"]
+    if "fatrop_ocp_c_solve" in sources[0].read_text():
+        sources.append(Path(directory) / f"{name}_status.c")
+        sources[1].write_text(FATROP_STATUS_SHIM)
+    return sources
 
 
-def _build(compiler: str, source: Path, target: Path) -> str:
-    """Compile `source` into `target` atomically; "" on success, else why not."""
-    partial = source.with_suffix(".so")
+def _build(compiler: str, sources: list[Path], target: Path) -> str:
+    """Compile `sources` into `target` atomically; "" on success, else why not."""
+    partial = sources[0].with_suffix(".so")
+    command = _compile_command(compiler, sources, partial)
     try:
-        result = subprocess.run(_compile_command(compiler, source, partial), capture_output=True, text=True)
+        result = subprocess.run(command, capture_output=True, text=True, timeout=COMPILE_TIMEOUT_S)
+    except subprocess.TimeoutExpired:
+        return f"took longer than {COMPILE_TIMEOUT_S:.0f} s"
     except OSError as exc:
         return str(exc)
     if result.returncode != 0 or not partial.exists():
@@ -99,26 +142,64 @@ def _build(compiler: str, source: Path, target: Path) -> str:
     return ""
 
 
-def compiled(function: ca.Function) -> ca.Function:
-    """`function` compiled to a shared library (cached), or `function` itself when it cannot be."""
+def compiled_library(function: ca.Function) -> Path | None:
+    """The shared library of `function` (compiled once, cached), or None when it cannot be built."""
     name = function.name()
     with tempfile.TemporaryDirectory(prefix="husky-sim-codegen-") as tmp:
-        source = _generate(function, tmp)
-        key_material = source.read_bytes() + ca.__version__.encode() + " ".join(C_FLAGS).encode()
+        sources = _generate(function, tmp)
+        key_material = b"".join(s.read_bytes() for s in sources)
+        # the library links CasADi's FATROP by its path (rpath), so the path is part of the key
+        key_material += ca.__version__.encode() + str(Path(ca.__file__).parent).encode()
+        key_material += " ".join((*C_FLAGS, _SHIM_DEFINE)).encode()
         key = hashlib.sha256(key_material).hexdigest()[:24]
         directory = cache_dir()
         target = directory / f"{name}_{key}.so"
+        if target.exists() and not _loads(target):
+            target.unlink(missing_ok=True)  # a damaged cache entry is rebuilt, never trusted
         if not target.exists():
             compiler = _compiler()
             if compiler is None:
                 _warn_once("no C compiler found (cc, gcc or $CC): NMPC solvers run uncompiled, slower")
-                return function
+                return None
             directory.mkdir(parents=True, exist_ok=True)
             with open(directory / f"{name}_{key}.lock", "w") as lock:
                 fcntl.flock(lock, fcntl.LOCK_EX)  # one process compiles, the others wait and load
                 if not target.exists():
-                    failure = _build(compiler, source, target)
+                    failure = _build(compiler, sources, target)
+                    if not failure and not _loads(target):
+                        failure = "the compiled library does not load"
                     if failure:
                         _warn_once(f"compiling the NMPC solver failed ({failure}); it runs uncompiled")
-                        return function
-    return ca.external(name, str(target))
+                        return None
+    return target
+
+
+def _loads(library: Path) -> bool:
+    """Whether the shared library can be loaded (a truncated or foreign file cannot)."""
+    try:
+        ctypes.CDLL(str(library))
+    except OSError:
+        return False
+    return True
+
+
+def compiled(function: ca.Function) -> ca.Function:
+    """`function` compiled to a shared library (cached), or `function` itself when it cannot be."""
+    library = compiled_library(function)
+    return function if library is None else ca.external(function.name(), str(library))
+
+
+class FatropStatus:
+    """FATROP's return flag and iteration count of the last solve on this thread, read from a
+    compiled solver's status shim (the library is already loaded by `casadi.external`)."""
+
+    def __init__(self, library: Path) -> None:
+        handle = ctypes.CDLL(str(library))
+        self._flag, self._iterations = handle.husky_fatrop_last_flag, handle.husky_fatrop_last_iterations
+        self._flag.restype = self._iterations.restype = ctypes.c_int
+
+    def last(self) -> tuple[str, int]:
+        """(flag name, iterations); "SolverError" if FATROP raised."""
+        flag = self._flag()
+        name = FATROP_RETURN_FLAGS[flag] if 0 <= flag < len(FATROP_RETURN_FLAGS) else "SolverError"
+        return name, int(self._iterations())
