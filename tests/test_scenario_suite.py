@@ -9,7 +9,7 @@ that the obstacle constraint was active at some step (a scenario that never acti
 nothing and is rejected).
 
 The table is the paper's controllers reproduced with the paper's solver, IPOPT (the reference
-backend), so every cell runs on it; the default backend, FATROP, ends 10 of these knife-edge
+backend), so every cell runs on it; the default backend, FATROP, ends at least 9 of these knife-edge
 cells differently (README, "The scenario suite").
 """
 
