@@ -5,7 +5,8 @@ source, the CasADi version and the compiler command, so a problem is compiled on
 configuration and machine, and every process (suite and sweep workers) loads the same file. A
 file lock makes concurrent workers wait for the one that compiles instead of compiling too.
 Without a C compiler, or when compiling fails, the uncompiled Function is used and one warning
-says so; results are the same, only slower.
+says so; it is slower, and for FATROP the exit flag is then not visible, so its acceptable exits
+go to IPOPT (controllers.backends.fatrop).
 
 A FATROP solver is compiled with a status shim (FATROP_STATUS_SHIM): its call of
 `fatrop_ocp_c_solve` goes through a wrapper that keeps FATROP's own return flag and iteration
