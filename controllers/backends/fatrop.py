@@ -96,7 +96,6 @@ class FatropSolver:
     name = "fatrop"
 
     def __init__(self, nlp: NLP, options: SolverOptions) -> None:
-        self._nlp, self._options = nlp, options
         lbx, ubx, lbg, ubg = nlp.bounds
         self._stagewise = stagewise = transcribe(nlp.problem, lbg, ubg, nlp.stages)
         bounds = {
