@@ -94,6 +94,7 @@ def test_an_interrupted_suite_stops_its_workers_and_writes_no_results(tmp_path: 
     assert proc.returncode == 130, err
     assert took_s < 1.0, f"took {took_s:.2f} s to stop"
     assert not (out / "results.csv").exists() and "no results.csv written" in err
+    assert "resource_tracker" not in err  # the quick exit still releases the pool's semaphores
     summaries = [json.loads(p.read_text()) for p in out.glob("runs/*/summary.json")]
     assert len(summaries) == 2 and {s["outcome"] for s in summaries} == {"interrupted"}
     assert {s["interrupted_by"] for s in summaries} == {"SIGTERM"}  # the parent stopped them
