@@ -5,7 +5,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: install test demo bench lint clean
+.PHONY: install test test-fast demo bench lint clean
 
 install: $(STAMP)
 
@@ -21,6 +21,11 @@ $(STAMP): pyproject.toml constraints.txt
 test: $(STAMP)
 	$(BIN)/ruff check .
 	$(BIN)/python -m pytest -n auto -q
+
+# The pure tests only (no PyBullet, no closed loop), in under a minute: for the edit-test cycle.
+test-fast: $(STAMP)
+	$(BIN)/ruff check .
+	$(BIN)/python -m pytest -n auto -q -m "not physics and not slow"
 
 # The main job: the paper's point-stabilisation scenario and a head-on moving obstacle for the
 # paper's bt, cbf and relax-cbf and our husky-cbf at N = 5 and 12 in PyBullet -> results table

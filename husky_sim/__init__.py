@@ -1,5 +1,30 @@
 """husky-nav-sim: the Husky A200 in PyBullet, scenarios, the validation suite and its tools.
 
-Importing the package imports nothing heavy (PyBullet comes in through husky_sim.bullet where a
-simulation module needs it), so the command line installs its signal handlers before any
-library that could swallow an interrupt is loaded."""
+Importing the package registers the gymnasium environment "HuskyNav-v0"
+(husky_sim.runs.environment) and imports nothing else heavy (PyBullet comes in through
+husky_sim.sim.bullet where a simulation module needs it). Gymnasium (and NumPy under it) is
+imported with SIGINT and SIGTERM held back: this runs before the command line can install its
+signal handlers, and NumPy turns an interrupt during its import into an ImportError; a held
+signal is delivered right after, with Python's default meaning."""
+
+from __future__ import annotations
+
+import signal
+import threading
+
+
+def _register_environments() -> None:
+    held = (signal.SIGINT, signal.SIGTERM)
+    main = threading.current_thread() is threading.main_thread()
+    previous = signal.pthread_sigmask(signal.SIG_BLOCK, held) if main else None
+    try:
+        import gymnasium
+
+        if "HuskyNav-v0" not in gymnasium.registry:
+            gymnasium.register("HuskyNav-v0", entry_point="husky_sim.runs.environment:make_husky_nav")
+    finally:
+        if previous is not None:
+            signal.pthread_sigmask(signal.SIG_SETMASK, previous)
+
+
+_register_environments()

@@ -73,7 +73,7 @@ SERVE_LOG_COLUMNS = (
 EVENTS = ("command", "stale", "brake", "overrun", "shutdown")  # one per serve.csv row
 #: Counted apart (the same step is also a `brake` row): the controller raised instead of returning.
 ERROR = "error"
-#: The controller's own counts, under the names of a run's summary (husky_sim.metrics): only the
+#: The controller's own counts, under the names of a run's summary (husky_sim.sim.metrics): only the
 #: node knows them, so a rehearsal's summary takes them from the node's.
 CONTROLLER_COUNTS = (
     "fallbacks",

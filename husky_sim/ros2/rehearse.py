@@ -4,7 +4,7 @@ the whole control loop crossing DDS.
 The node is started as a subprocess on the resolved scenario (written to the run folder as
 `scenario.yaml`), on a DDS domain of its own and with all traffic kept on 127.0.0.1, so a
 rehearsal can never command a robot on the network. The episode is run, judged and written
-exactly as `husky-sim run` does (husky_sim.run.run_scenario, with husky_sim.ros2.sim_robot.DdsRobot
+exactly as `husky-sim run` does (husky_sim.runs.run.run_scenario, with husky_sim.ros2.sim_robot.DdsRobot
 in the controller's place); the summary adds a `transport` section: latencies both ways, replies
 that never came, and the node's own safety events (its serve.csv and serve_summary.json are in
 `node/`, with its output in serve.out).
@@ -22,8 +22,8 @@ from husky_sim import interrupts
 from husky_sim.ros2.node import CONTROLLER_COUNTS, timing_stats
 from husky_sim.ros2.settings import Ros2Settings, check_domain_id, lease_domain_id
 from husky_sim.ros2.sim_robot import DdsRobot, NodeNotFound
-from husky_sim.run import controller_header, prepare_out_dir, run_scenario, write_summary
-from husky_sim.scenario import Scenario
+from husky_sim.runs.run import controller_header, prepare_out_dir, run_scenario, write_summary
+from husky_sim.runs.scenario import Scenario
 from husky_sim.scenario_file import scenario_yaml
 
 #: Wall time (s) the node has to build its controller and appear on DDS.

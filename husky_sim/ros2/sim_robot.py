@@ -1,6 +1,6 @@
 """The simulated Husky as a DDS "robot": the controller side of the episode loop, over DDS.
 
-`DdsRobot` stands where a controller stands in `husky_sim.episode.run_episode` (it implements
+`DdsRobot` stands where a controller stands in `husky_sim.sim.episode.run_episode` (it implements
 controllers.Controller), so the rehearsal runs the very loop, sensing, drive, collision checks
 and judging of `husky-sim run`. At each control step it publishes the sensed obstacles (MarkerArray),
 the sensed pose (Odometry, stamped with sim time) and /clock, in that order, then waits for the node's

@@ -1,0 +1,99 @@
+"""`husky-sim bench` (solve times per backend) and `husky-sim bench-sim` (closed-loop real-time factor)."""
+
+from __future__ import annotations
+
+import argparse
+
+from husky_sim.cli.common import (
+    CONTROLLER_CHOICES,
+    SOLVER_CHOICES,
+    count_arg,
+    horizon_arg,
+    number_in,
+    unit_float_arg,
+)
+
+
+def cmd_bench(args: argparse.Namespace) -> int:
+    from husky_sim.bench.solvers import format_table, records_json, run_bench
+
+    records = run_bench(
+        variants=args.variants,
+        horizons=args.horizons,
+        obstacle_counts=args.obstacles,
+        solvers=args.solvers,
+        steps=args.steps,
+        gamma=args.gamma,
+        progress=not args.json,
+    )
+    if args.json:
+        print(records_json(records))
+    else:
+        print(
+            f"solve times on the same {args.steps} recorded closed-loop problems per cell "
+            "(kinematic point stabilisation); CPU time is this thread's"
+        )
+        print(format_table(records))
+    return 0
+
+
+def cmd_bench_sim(args: argparse.Namespace) -> int:
+    from husky_sim.bench.closed_loop import run_sim_bench
+
+    print(run_sim_bench(duration_s=args.duration, solver=args.solver).report())
+    if args.drive_table:
+        from husky_sim.bench.closed_loop import drive_table
+
+        print("\nachieved versus commanded body velocity on flat ground (published drive limits)")
+        print(drive_table())
+    if args.turn_table:
+        from husky_sim.bench.closed_loop import turn_table
+
+        print(
+            "\nyaw rate achieved over check's payload x torque x friction corners "
+            "(4 s held, mean of the last 2 s)"
+        )
+        print(turn_table())
+    return 0
+
+
+def add_parsers(sub: argparse._SubParsersAction) -> None:
+    """Register `bench`, `bench-sim`."""
+    bench = sub.add_parser(
+        "bench", help="NMPC solve times of every solver backend on the same recorded closed-loop problems"
+    )
+    bench.add_argument("--json", action="store_true", help="print JSON records instead of a table")
+    bench.add_argument("--steps", type=count_arg, default=150, help="control steps per cell (default 150)")
+    paper = CONTROLLER_CHOICES[:4]  # the bench times the paper's OCP (husky-cbf: `run` reports its times)
+    bench.add_argument("--variants", nargs="+", choices=paper, default=list(paper))
+    bench.add_argument("--horizons", nargs="+", type=horizon_arg, default=[5, 7, 12])
+    bench.add_argument(
+        "--obstacles", nargs="+", type=int, choices=range(1, 8), default=[1, 7], metavar="{1..7}"
+    )
+    bench.add_argument("--solvers", nargs="+", choices=SOLVER_CHOICES, default=list(SOLVER_CHOICES))
+    bench.add_argument(
+        "--gamma", type=unit_float_arg, default=0.1, help="CBF decay rate in [0, 1] (default 0.1)"
+    )
+    bench.set_defaults(func=cmd_bench)
+    bench_sim = sub.add_parser("bench-sim", help="PyBullet real-time factor and peak memory")
+    bench_sim.add_argument(
+        "--duration",
+        type=number_in(float, 0.1, 600.0),
+        default=30.0,
+        help="episode length in s, 0.1 to 600 (default 30)",
+    )
+    bench_sim.add_argument(
+        "--solver",
+        choices=SOLVER_CHOICES[:2],
+        default=None,
+        help="NLP backend of the episode (default: SolverOptions.backend)",
+    )
+    bench_sim.add_argument(
+        "--drive-table", action="store_true", help="also print achieved vs commanded v and omega"
+    )
+    bench_sim.add_argument(
+        "--turn-table",
+        action="store_true",
+        help="also print the yaw rate achieved with payload, torque, friction",
+    )
+    bench_sim.set_defaults(func=cmd_bench_sim)

@@ -1,0 +1,306 @@
+"""Run one scenario with one controller in PyBullet and write `summary.json` and `log.csv`."""
+
+from __future__ import annotations
+
+import json
+import math
+import re
+import signal
+from pathlib import Path
+
+from controllers import SAFETY_CONSTRAINTS, Controller, NMPCController, Reference, SafetyConstraint
+from husky_sim import interrupts
+from husky_sim.interrupts import RunInterrupted
+from husky_sim.runs.foxglove_record import MCAP_NAME, FoxgloveRecorder
+from husky_sim.runs.scenario import Scenario, load_scenario
+from husky_sim.sim.episode import run_episode
+from husky_sim.sim.geometry import load_geometry
+
+#: Where runs go unless --out says otherwise.
+RESULTS_DIR = Path("results")
+
+#: Kinematic clearance above -this (m) is contact, not collision: IPOPT meets B = 0 to ~1e-9.
+KINEMATIC_CONTACT_TOL_M = 1e-6
+
+
+def _safe_component(text: str) -> str:
+    """A path component made of [A-Za-z0-9_.+-] that cannot climb out of its parent."""
+    cleaned = re.sub(r"[^A-Za-z0-9_.+-]", "_", text).lstrip(".")
+    return cleaned[:80] or "_"
+
+
+def run_dir_name(
+    scenario: str, controller: str, horizon: int, gamma: float, seed: int, kind: str = ""
+) -> str:
+    """The one name of a run's folder: never a path outside its parent, whatever the scenario's
+    name holds (the schema already restricts names; this holds for any caller). `kind` prefixes
+    folders of other commands than `run` (`serve`, `rehearse`)."""
+    prefix = f"{kind}__" if kind else ""
+    return _safe_component(f"{prefix}{scenario}__{controller}__N{horizon}__g{gamma:g}__s{seed}")
+
+
+def default_run_dir(
+    scenario: str, controller: str, horizon: int, gamma: float, seed: int, kind: str = ""
+) -> Path:
+    return RESULTS_DIR / run_dir_name(scenario, controller, horizon, gamma, seed, kind)
+
+
+def prepare_out_dir(out_dir: Path) -> Path:
+    """Create the run directory before anything runs; one-line ValueError naming `--out` if it is
+    an existing file, a special file, or cannot be created (too long a name, no permission)."""
+    try:
+        if out_dir.exists() and not out_dir.is_dir():
+            raise ValueError(f"--out: {str(out_dir)[:120]} exists and is not a directory")
+        out_dir.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise ValueError(f"--out: cannot create {str(out_dir)[:120]!r} ({exc.strerror or exc})") from None
+    return out_dir
+
+
+def _json_safe(value: object) -> object:
+    """JSON has no NaN or infinity: a non-finite number (a physics blow-up) is written as null."""
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    if isinstance(value, dict):
+        return {k: _json_safe(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_json_safe(v) for v in value]
+    return value
+
+
+def write_summary(out_dir: Path, summary: dict[str, object]) -> None:
+    """summary.json (strict JSON), written whole even if a signal arrives meanwhile."""
+    with interrupts.deferred():
+        tmp = out_dir / "summary.json.tmp"
+        tmp.write_text(json.dumps(_json_safe(summary), indent=2, allow_nan=False) + "\n")
+        tmp.replace(out_dir / "summary.json")
+
+
+def controller_header(
+    sc: Scenario,
+    controller: str,
+    horizon: int | None = None,
+    gamma: float | None = None,
+    seed: int | None = None,
+) -> dict[str, object]:
+    """The summary fields that say which controller ran with which settings (from the scenario and
+    the overrides; building the controller is not needed)."""
+    if controller == "husky-cbf":
+        full = sc.husky_cbf_config(horizon, gamma)
+        nmpc_config, omega_max = full.nmpc, full.omega_cmd_max_radps
+    else:
+        nmpc_config = sc.controller_config(controller, horizon, gamma)
+        omega_max = nmpc_config.omega_max_radps
+    return {
+        "scenario": sc.name,
+        "controller": controller,
+        "horizon": nmpc_config.horizon,
+        "gamma": nmpc_config.gamma,
+        "seed": sc.seed if seed is None else seed,
+        "model": "physics",
+        "tau_s": nmpc_config.tau_s,
+        "prediction_time_s": nmpc_config.horizon * nmpc_config.tau_s,
+        "v_min_mps": nmpc_config.v_min_mps,
+        "v_max_mps": nmpc_config.v_max_mps,
+        "omega_max_radps": omega_max,
+        "robot_radius_m": nmpc_config.robot_radius_m,
+    }
+
+
+def run_scenario(
+    scenario: Scenario | str,
+    controller: SafetyConstraint,
+    horizon: int | None = None,
+    gamma: float | None = None,
+    seed: int | None = None,
+    out_dir: Path | None = None,
+    implementation: Controller | None = None,
+    live_port: int | None = None,
+) -> dict[str, object]:
+    """Run a scenario; return the summary (also written to out_dir/summary.json, with the log,
+    the trace and run.mcap for Foxglove; `live_port` also streams it to Foxglove while it runs).
+
+    `implementation` runs in the controller's place (a rehearsal's DDS robot, whose decisions come
+    from the named controller in another process); by default the named controller is built here.
+    """
+    sc = load_scenario(scenario) if isinstance(scenario, str) else scenario
+    header = controller_header(sc, controller, horizon, gamma, seed)
+    robot_radius_m = header.pop("robot_radius_m")
+    nmpc = implementation if implementation is not None else sc.make_controller(controller, horizon, gamma)
+    episode_config = sc.episode_config(seed)
+    if out_dir is not None:
+        prepare_out_dir(out_dir)
+    log_path = out_dir / "log.csv" if out_dir is not None else None
+    reference = sc.reference_object()
+    recorder = _recorder(sc, reference, out_dir, live_port)
+    finished = False
+    try:
+        result = run_episode(
+            nmpc, reference, episode_config, log_path, robot_radius_m=robot_radius_m, observer=recorder
+        )
+        finished = True
+    except (RunInterrupted, KeyboardInterrupt) as exc:  # before the first control step
+        signum = interrupts.signum_of(exc)
+        if out_dir is not None:
+            name = signal.Signals(signum).name
+            write_summary(out_dir, {**header, "outcome": "interrupted", "interrupted_by": name, "steps": 0})
+        raise RunInterrupted(signum) from None
+    finally:  # a recording cut short is still a valid file, and says so
+        if recorder is not None and not finished:
+            with interrupts.deferred():
+                recorder.close("ended early", "(interrupted or failed before its first control step)")
+    summary: dict[str, object] = {**header, **result.metrics.as_dict()}
+    if recorder is not None:
+        with interrupts.deferred():
+            recorder.close(str(summary["outcome"]), f"after {summary['steps']} steps")
+    if out_dir is not None:
+        with interrupts.deferred():
+            result.trace.save(out_dir / "trace.npz")
+        write_summary(out_dir, summary)
+    if result.interrupted_by is not None:
+        raise RunInterrupted(result.interrupted_by)
+    return summary
+
+
+def _recorder(
+    sc: Scenario, reference: Reference, out_dir: Path | None, live_port: int | None
+) -> FoxgloveRecorder | None:
+    """The run's Foxglove recorder (run.mcap in out_dir, and live on live_port), or None when
+    neither is asked for."""
+    if out_dir is None and live_port is None:
+        return None
+    specs = sc.obstacle_specs()
+    path = out_dir / MCAP_NAME if out_dir is not None else None
+    return FoxgloveRecorder(
+        path,
+        reference,
+        [o.radius_m for o in specs],
+        [o.height_m for o in specs],
+        load_geometry().footprint_half_extents_m,
+        sc.tau_s,
+        sc.duration_s,
+        live_port,
+    )
+
+
+def run_scenario_kinematic(
+    scenario: Scenario | str,
+    controller: SafetyConstraint,
+    horizon: int | None = None,
+    gamma: float | None = None,
+    robot_radius_m: float | None = None,
+) -> dict[str, object]:
+    """The same scenario on the controller's own unicycle model (no physics; the paper's setting).
+
+    Clearance is measured on the circle model; `robot_radius_m` overrides the scenario's circle
+    (the paper's simulations use 0.25 m). Outcome names follow the PyBullet runs': a set-point run
+    is `reached`, `collided`, `stuck` (mean |v| and |omega| of the last 10 steps below the
+    scenario's thresholds, away from the goal) or `timeout`; a tracking run is `tracking`,
+    `collided` or `stuck`.
+    """
+    from dataclasses import replace
+
+    import numpy as np
+
+    from controllers import Obstacle, SetPoint
+    from husky_sim.sim.kinematic import GoalTolerance, run_kinematic
+    from husky_sim.sim.metrics import (
+        NO_TRACKING_FIELDS,
+        count_reversals,
+        is_idle,
+        judge_tracking,
+        reference_reachable,
+        tracking_rmse,
+    )
+
+    sc = load_scenario(scenario) if isinstance(scenario, str) else scenario
+    if controller not in SAFETY_CONSTRAINTS:
+        raise ValueError(f"controller: the kinematic loop runs {SAFETY_CONSTRAINTS}, got {controller!r}")
+    config = sc.controller_config(controller, horizon, gamma)
+    if robot_radius_m is not None:
+        config = replace(config, robot_radius_m=robot_radius_m)
+    specs = sc.obstacle_specs()
+    if any(o.waypoints for o in specs):
+        raise ValueError(f"{sc.name}: waypoint obstacles have no constant-velocity kinematic model")
+    obstacles = [Obstacle(o.x_m, o.y_m, o.radius_m, o.vx_mps, o.vy_mps) for o in specs]
+    reference = sc.reference_object()
+    s = sc.success
+    ep = run_kinematic(
+        NMPCController(config),
+        (sc.robot.start.x_m, sc.robot.start.y_m, sc.robot.start.yaw_rad),
+        reference,
+        obstacles,
+        sc.tau_s,
+        sc.duration_s,
+        config.robot_radius_m,
+        GoalTolerance(s.goal_position_m, s.goal_heading_rad, s.goal_hold_s),
+    )
+    is_setpoint = isinstance(reference, SetPoint)
+    refs = np.array([reference.state_at(t) for t in ep.times_s])
+    errors = np.hypot(*(ep.states[:, :2] - refs[:, :2]).T)
+    outcomes = sc.episode_config().outcomes
+    rmse = None if is_setpoint else tracking_rmse(errors, ep.times_s, s.tracking_settle_s)
+    window = ep.controls[-s.stuck_window_steps :]
+    idle = is_idle(window[:, 0], window[:, 1], outcomes)
+    far = errors[-1] > (s.goal_position_m if is_setpoint else s.tracking_rmse_m)
+    collided = bool(obstacles) and ep.min_clearance_m < -KINEMATIC_CONTACT_TOL_M
+    if collided:
+        outcome = "collided"
+    elif is_setpoint and ep.reached:
+        outcome = "reached"
+    elif idle and far:
+        outcome = "stuck"
+    else:
+        outcome = "timeout" if is_setpoint else "tracking"
+    judgement = None
+    if not is_setpoint:
+        # the robot here is the controller's circle (config.robot_radius_m), not the URDF footprint:
+        # it is the body this model's clearance and collisions are measured on, so a reference point
+        # is reachable exactly when that body could stand on it without collision
+        centres = (
+            np.stack([o.position_after(ep.times_s) for o in obstacles], axis=1)
+            if obstacles
+            else np.zeros((len(ep.times_s), 0, 2))
+        )
+        reachable = reference_reachable(
+            refs[:, :2], centres, np.array([o.radius_m for o in obstacles]), config.robot_radius_m
+        )
+        judgement = judge_tracking(outcome, ep.times_s, errors, reachable, sc.tau_s, outcomes)
+    converged = outcome == "reached" if is_setpoint else judgement.converged
+    reversals, reverse_steps = count_reversals(ep.controls[:, 0])
+    return {
+        "scenario": sc.name,
+        "controller": controller,
+        "horizon": config.horizon,
+        "gamma": config.gamma,
+        "model": "kinematic",
+        "tau_s": config.tau_s,
+        "prediction_time_s": config.horizon * config.tau_s,
+        "v_min_mps": config.v_min_mps,
+        "v_max_mps": config.v_max_mps,
+        "omega_max_radps": config.omega_max_radps,
+        "outcome": outcome,
+        "collided": collided,
+        "converged": bool(converged),
+        "min_clearance_m": ep.min_clearance_m if obstacles else None,
+        "final_position_error_m": float(errors[-1]),
+        "tracking_rmse_m": rmse,
+        **(NO_TRACKING_FIELDS if judgement is None else judgement.fields()),
+        "time_to_goal_s": ep.time_to_goal_s,
+        "reversals": reversals,
+        "reverse_steps": reverse_steps,
+        "max_abs_v_mps": float(np.max(np.abs(ep.controls[:, 0]))),
+        "max_abs_omega_radps": float(np.max(np.abs(ep.controls[:, 1]))),
+        "safety_active_steps": ep.safety_active_steps,
+        "fallbacks": ep.fallbacks,
+        "solve_ms_median": 1000.0 * float(np.median(ep.solve_time_s)),
+        "robot_radius_m": config.robot_radius_m,
+        "steps": len(ep.controls),
+        "t_s": ep.times_s[:-1].tolist(),
+        "x_m": ep.states[:-1, 0].tolist(),
+        "y_m": ep.states[:-1, 1].tolist(),
+        "ref_x_m": refs[:-1, 0].tolist(),
+        "ref_y_m": refs[:-1, 1].tolist(),
+        "v_cmd_mps": ep.controls[:, 0].tolist(),
+        "omega_cmd_radps": ep.controls[:, 1].tolist(),
+    }

@@ -1,0 +1,578 @@
+"""Scenario files: a validated YAML schema (pydantic) and its translation into a controller
+configuration, an episode configuration and a reference.
+
+Every value carries its unit in its name and must be a finite number within a stated physical
+range (`_real` / `_whole` below say which); types are strict (no bool, string or sexagesimal
+coercion: a number is a number). Unknown keys are rejected, and so are a start or goal inside an
+obstacle, a random field that cannot be placed, and work that would not fit a run (more than
+`MAX_OBSTACLES` obstacles, `MAX_CONTROL_STEPS` control steps or a control period that is not a
+whole number of physics steps), all before anything runs. Validation errors become one line
+naming the field, the allowed range and at most a short excerpt of the value (ScenarioError).
+Command-line overrides (horizon, gamma, seed) are applied by `with_overrides`, which validates
+them with the same schema.
+"""
+
+from __future__ import annotations
+
+import functools
+import json
+import math
+import re
+from pathlib import Path
+from typing import Annotated, Any, Literal
+
+import numpy as np
+from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, ValidationError, model_validator
+
+from controllers import (
+    CircleTrajectory,
+    Controller,
+    NMPCConfig,
+    NMPCController,
+    Reference,
+    SafetyConstraint,
+    SetPoint,
+    SolverOptions,
+)
+from controllers.husky_cbf import Footprint, HuskyCBFConfig, HuskyCBFController, RobotResponse
+from husky_sim.paths import SCENARIO_DIR
+from husky_sim.scenario_file import ScenarioFileError, read_scenario_data
+from husky_sim.sim.drive import DriveConfig
+from husky_sim.sim.episode import EpisodeConfig
+from husky_sim.sim.geometry import load_geometry
+from husky_sim.sim.outcomes import Outcomes
+from husky_sim.sim.robot import WheelFriction
+from husky_sim.sim.sensing import SensingConfig
+from husky_sim.sim.world import ObstacleSpec, WorldConfig
+from husky_sim.sim.yaw_response import DEFAULT_FILE as YAW_RESPONSE_FILE
+from husky_sim.sim.yaw_response import GAIN_BOUNDS, TIME_CONSTANT_BOUNDS_S, YawResponse
+
+#: Most obstacles in one scenario (explicit plus random): each is a slot in the NLP, and solve
+#: time grows with them (7 obstacles: about 5 ms at N = 5; 1,000: 266 ms).
+MAX_OBSTACLES = 64
+#: Longest episode, in control steps (an hour at tau = 0.1 s).
+MAX_CONTROL_STEPS = 36_000
+#: Largest |x| or |y| of any position (m).
+MAX_COORDINATE_M = 500.0
+#: Scenario names: what a run directory is named after, so no path separators or controls.
+NAME_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9_.+-]{0,79}$"
+#: Most characters of a bad value quoted in an error message.
+EXCERPT_CHARS = 40
+TWO_PI = 2 * math.pi
+
+
+class ScenarioError(ValueError):
+    """A scenario that cannot run; the message is one line naming the field."""
+
+
+def _range_text(lo: float, hi: float, unit: str, lo_open: bool) -> str:
+    unit_text = f" {unit}" if unit else ""
+    return f"{'(' if lo_open else '['}{lo:.10g}, {hi:.10g}]{unit_text}"
+
+
+def _real(lo: float, hi: float, unit: str = "", *, lo_open: bool = False) -> Any:
+    """A float field: a number (not a bool or a string), finite, in [lo, hi] (or (lo, hi]); the
+    error names the range."""
+    allowed = f"must be a finite number in {_range_text(lo, hi, unit, lo_open)}"
+
+    def check(value: object) -> float:
+        if isinstance(value, bool) or not isinstance(value, int | float):
+            raise ValueError(allowed)
+        try:
+            number = float(value)
+        except OverflowError:  # an integer beyond any float
+            raise ValueError(allowed) from None
+        if not (math.isfinite(number) and (number > lo if lo_open else number >= lo) and number <= hi):
+            raise ValueError(allowed)
+        return number
+
+    return Annotated[float, BeforeValidator(check)]
+
+
+def _whole(lo: int, hi: int, unit: str = "") -> Any:
+    """An integer field in [lo, hi] (bools and floats such as 5.0 are not integers here)."""
+    allowed = f"must be an integer in {_range_text(lo, hi, unit, False)}"
+
+    def check(value: object) -> int:
+        if isinstance(value, bool) or not isinstance(value, int) or not lo <= value <= hi:
+            raise ValueError(allowed)
+        return value
+
+    return Annotated[int, BeforeValidator(check)]
+
+
+def _name(value: object) -> str:
+    if not isinstance(value, str) or not re.fullmatch(NAME_PATTERN, value):
+        raise ValueError(
+            "must be 1 to 80 letters, digits or _ . + - starting with a letter or digit "
+            "(it names the run's folder, so no path separators, spaces or control characters)"
+        )
+    return value
+
+
+Coordinate = _real(-MAX_COORDINATE_M, MAX_COORDINATE_M, "m")
+Angle = _real(-TWO_PI, TWO_PI, "rad")
+Speed = _real(-5.0, 5.0, "m/s")
+Weight = _real(0.0, 1e6, lo_open=True)
+ObstacleRadius = _real(0.0, 20.0, "m", lo_open=True)
+Seed = _whole(0, 2**32 - 1)
+
+
+class _Strict(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True, strict=True)
+
+
+class Pose(_Strict):
+    x_m: Coordinate
+    y_m: Coordinate
+    yaw_rad: Angle = 0.0
+
+
+class Circle(_Strict):
+    """Reference circle p(t) = c + R [cos(w t + phi), sin(w t + phi)]."""
+
+    radius_m: _real(0.0, 100.0, "m", lo_open=True)
+    angular_rate_radps: _real(-2.0, 2.0, "rad/s")
+    center_x_m: Coordinate = 0.0
+    center_y_m: Coordinate = 0.0
+    phase_rad: Angle = 0.0
+
+    @model_validator(mode="after")
+    def _nonzero_rate(self) -> Circle:
+        if self.angular_rate_radps == 0:
+            raise ValueError("angular_rate_radps must be non-zero")
+        return self
+
+
+class ReferenceSpec(_Strict):
+    """Exactly one of a goal pose (point stabilisation) or a circle (tracking)."""
+
+    goal: Pose | None = None
+    circle: Circle | None = None
+
+    @model_validator(mode="after")
+    def _exactly_one(self) -> ReferenceSpec:
+        if (self.goal is None) == (self.circle is None):
+            raise ValueError("give exactly one of goal or circle")
+        return self
+
+
+class ObstacleEntry(_Strict):
+    """A cylinder; motion as (vx, vy), or as the paper's (heading, speed), or waypoints."""
+
+    x_m: Coordinate
+    y_m: Coordinate
+    radius_m: ObstacleRadius
+    height_m: _real(0.0, 10.0, "m", lo_open=True) = 1.0
+    vx_mps: Speed = 0.0
+    vy_mps: Speed = 0.0
+    heading_rad: Angle | None = None
+    speed_mps: _real(0.0, 5.0, "m/s") | None = None
+    waypoints: list[tuple[Coordinate, Coordinate]] = Field(default_factory=list, max_length=100)
+
+    @model_validator(mode="after")
+    def _one_motion(self) -> ObstacleEntry:
+        polar = self.heading_rad is not None or self.speed_mps is not None
+        if polar and (self.vx_mps or self.vy_mps):
+            raise ValueError("give either vx_mps/vy_mps or heading_rad/speed_mps, not both")
+        if self.waypoints and (self.vx_mps or self.vy_mps or self.heading_rad is not None):
+            raise ValueError("waypoints move at speed_mps; do not also give a velocity or heading")
+        if self.heading_rad is not None and self.speed_mps is None:
+            raise ValueError("heading_rad needs speed_mps")
+        return self
+
+    def spec(self) -> ObstacleSpec:
+        vx, vy = self.vx_mps, self.vy_mps
+        if self.heading_rad is not None:
+            vx = self.speed_mps * math.cos(self.heading_rad)
+            vy = self.speed_mps * math.sin(self.heading_rad)
+        return ObstacleSpec(
+            self.x_m,
+            self.y_m,
+            self.radius_m,
+            self.height_m,
+            vx,
+            vy,
+            tuple(self.waypoints),
+            self.speed_mps or 0.0 if self.waypoints else 0.0,
+        )
+
+
+class RandomObstacles(_Strict):
+    """A seeded field of static cylinders in a box, kept clear of the start and the goal."""
+
+    count: _whole(1, MAX_OBSTACLES)
+    seed: Seed = 0
+    x_range_m: tuple[Coordinate, Coordinate]
+    y_range_m: tuple[Coordinate, Coordinate]
+    radius_range_m: tuple[ObstacleRadius, ObstacleRadius] = (0.2, 0.4)
+    keep_clear_m: _real(0.0, 100.0, "m") = 1.5  # no obstacle surface within this of start or goal
+
+    @model_validator(mode="after")
+    def _ordered_ranges(self) -> RandomObstacles:
+        for name in ("x_range_m", "y_range_m", "radius_range_m"):
+            low, high = getattr(self, name)
+            if low > high:
+                raise ValueError(f"{name}: low ({low:g}) must not exceed high ({high:g})")
+        return self
+
+    def specs(self, keep_clear_of: list[tuple[float, float]]) -> list[ObstacleSpec]:
+        rng = np.random.default_rng(self.seed)
+        out: list[ObstacleSpec] = []
+        for _ in range(1000 * self.count):
+            if len(out) == self.count:
+                break
+            x, y = rng.uniform(*self.x_range_m), rng.uniform(*self.y_range_m)
+            r = rng.uniform(*self.radius_range_m)
+            if all(math.hypot(x - px, y - py) - r > self.keep_clear_m for px, py in keep_clear_of) and all(
+                math.hypot(x - o.x_m, y - o.y_m) > r + o.radius_m + 0.1 for o in out
+            ):
+                out.append(ObstacleSpec(float(x), float(y), float(r)))
+        return out
+
+
+class YawResponseSpec(_Strict):
+    """First-order yaw-rate lag of the robot (husky_sim.sim.yaw_response.YawResponse): gain
+    (dimensionless) and time constant (s)."""
+
+    gain: _real(*GAIN_BOUNDS)
+    time_constant_s: _real(*TIME_CONSTANT_BOUNDS_S, "s")
+
+    def params(self) -> YawResponse:
+        return YawResponse(self.gain, self.time_constant_s)
+
+
+@functools.cache
+def identified_yaw_response() -> YawResponse:
+    """The yaw lag identified in PyBullet (`husky-sim identify`), read once from YAW_RESPONSE_FILE;
+    a missing or malformed file is a one-line ScenarioError."""
+    source = f"{YAW_RESPONSE_FILE} (the identified yaw response; `husky-sim identify` writes it)"
+    try:
+        data = read_scenario_data(YAW_RESPONSE_FILE)
+    except ScenarioFileError as exc:
+        raise ScenarioError(f"{exc} (`husky-sim identify` writes it)") from None
+    wanted = {key: data.get(key) for key in YawResponseSpec.model_fields}
+    try:
+        return YawResponseSpec.model_validate_json(json.dumps(wanted, default=str), strict=True).params()
+    except ValidationError as exc:
+        raise ScenarioError(_one_line(exc, source)) from None
+
+
+class RobotSpec(_Strict):
+    """Start pose and the controller's robot circle: the URDF footprint radius plus a margin, or
+    an explicit radius (a radius below the footprint is flagged in every summary)."""
+
+    start: Pose
+    radius_margin_m: _real(0.0, 2.0, "m") | None = None
+    radius_m: _real(0.0, 5.0, "m", lo_open=True) | None = None
+    payload_kg: _real(0.0, 75.0, "kg") = 0.0  # Husky maximum payload 75 kg
+    yaw_response: YawResponseSpec | None = None  # default: the lag identified in PyBullet
+
+    @model_validator(mode="after")
+    def _one_radius(self) -> RobotSpec:
+        if (self.radius_m is None) == (self.radius_margin_m is None):
+            raise ValueError("give exactly one of radius_m or radius_margin_m")
+        return self
+
+    def radius(self) -> float:
+        if self.radius_m is not None:
+            return self.radius_m
+        return load_geometry().footprint_radius_m + self.radius_margin_m
+
+    def yaw_response_params(self) -> YawResponse:
+        """The robot's yaw-rate lag (gain, time constant s): the file's `yaw_response`, else the
+        default identified in PyBullet (assets/husky_a200/yaw_response.yaml)."""
+        if self.yaw_response is not None:
+            return self.yaw_response.params()
+        return identified_yaw_response()
+
+
+class ControllerSpec(_Strict):
+    """NMPC parameters; omitted ones take the paper's simulation defaults (NMPCConfig).
+
+    Commanded limits may exceed the Husky's (the audit of `husky-sim check` flags that), within
+    what a command can physically mean."""
+
+    horizon: _whole(1, 50, "steps") = 5
+    gamma: _real(0.0, 1.0) = 0.1
+    alpha: _real(0.0, 1.0) = 0.3
+    state_weight: tuple[Weight, Weight, Weight] = (10.0, 15.0, 0.7)
+    input_weight: tuple[Weight, Weight] = (1.0, 0.1)
+    clf_weight: tuple[Weight, Weight, Weight] = (1.0, 1.0, 1.0)
+    clf_slack_weight: Weight = 70.0
+    decay_slack_weight: Weight = 10.0
+    v_min_mps: _real(-5.0, 0.0, "m/s") = -1.0
+    v_max_mps: _real(0.0, 5.0, "m/s", lo_open=True) = 1.0
+    omega_max_radps: _real(0.0, 10.0, "rad/s", lo_open=True) = math.pi / 4
+    obstacle_prediction: Literal["constant-velocity", "frozen"] = "constant-velocity"
+    #: NLP solver (controllers.backends); omitted: the controllers' default (SolverOptions)
+    solver: Literal["ipopt", "fatrop"] | None = None
+
+
+class DriveSpec(_Strict):
+    """Overrides of the skid-steer drive (husky_sim.sim.drive.DriveConfig); omitted ones keep the
+    published Husky values."""
+
+    wheel_separation_multiplier: _real(0.5, 5.0) | None = None
+    max_linear_mps: _real(0.0, 5.0, "m/s", lo_open=True) | None = None
+    max_angular_radps: _real(0.0, 10.0, "rad/s", lo_open=True) | None = None
+    max_linear_accel_mps2: _real(0.0, 50.0, "m/s^2", lo_open=True) | None = None
+    max_angular_accel_radps2: _real(0.0, 100.0, "rad/s^2", lo_open=True) | None = None
+    wheel_torque_limit_nm: _real(0.0, 500.0, "N m", lo_open=True) | None = None
+
+    def config(self) -> DriveConfig:
+        return DriveConfig(**self.model_dump(exclude_none=True))
+
+
+class FrictionSpec(_Strict):
+    ground: _real(0.01, 5.0) = 1.0
+    wheel_longitudinal: _real(0.01, 5.0) = 1.0
+    wheel_lateral_scale: _real(0.01, 5.0) = 1.0
+
+
+class SensingSpec(_Strict):
+    pose_xy_std_m: _real(0.0, 5.0, "m") = 0.0
+    pose_yaw_std_rad: _real(0.0, math.pi, "rad") = 0.0
+    obstacle_xy_std_m: _real(0.0, 5.0, "m") = 0.0
+    latency_steps: _whole(0, 20, "steps") = 0
+    obstacle_velocity_scale: _real(0.0, 5.0) = 1.0  # reported / true obstacle velocity
+
+
+class SuccessSpec(_Strict):
+    goal_position_m: _real(0.0, 10.0, "m", lo_open=True) = 0.1
+    goal_heading_rad: _real(0.0, math.pi, "rad", lo_open=True) = 0.1
+    goal_hold_s: _real(0.0, 3600.0, "s", lo_open=True) = 1.0
+    tracking_rmse_m: _real(0.0, 10.0, "m", lo_open=True) = 0.3
+    tracking_settle_s: _real(0.0, 3600.0, "s") = 10.0
+    rejoin_s: _real(0.0, 3600.0, "s") = 5.0  # why 5 s: husky_sim.sim.episode.Outcomes
+    stuck_window_steps: _whole(1, 1000, "steps") = 10
+    stuck_speed_mps: _real(0.0, 1.0, "m/s", lo_open=True) = 0.05
+    stuck_yaw_rate_radps: _real(0.0, 2.0, "rad/s", lo_open=True) = 0.05
+
+
+class Scenario(_Strict):
+    """One scenario file."""
+
+    name: Annotated[str, BeforeValidator(_name)]
+    description: Annotated[str, Field(max_length=500, pattern=r"^[^\x00-\x1f\x7f]*$")] = ""
+    seed: Seed = 0
+    tau_s: _real(0.0005, 1.0, "s") = 0.1  # down to one physics step at the fastest physics_hz
+    duration_s: _real(0.0, 3600.0, "s", lo_open=True) = 30.0
+    physics_hz: _real(60.0, 2000.0, "Hz") = 240.0
+    robot: RobotSpec
+    reference: ReferenceSpec
+    obstacles: list[ObstacleEntry] = Field(default_factory=list, max_length=MAX_OBSTACLES)
+    random_obstacles: RandomObstacles | None = None
+    controller: ControllerSpec = ControllerSpec()
+    drive: DriveSpec = DriveSpec()
+    friction: FrictionSpec = FrictionSpec()
+    sensing: SensingSpec = SensingSpec()
+    success: SuccessSpec = SuccessSpec()
+
+    @model_validator(mode="after")
+    def _work_fits(self) -> Scenario:
+        ratio = self.physics_hz * self.tau_s
+        if abs(ratio - round(ratio)) > 1e-6:
+            raise ValueError(
+                f"tau_s: must be a whole number of physics steps (physics_hz x tau_s = {ratio:.6g})"
+            )
+        steps = math.ceil(self.duration_s / self.tau_s - 1e-9)
+        if steps < 1:
+            raise ValueError(f"duration_s: must last at least one control step (tau_s = {self.tau_s:g} s)")
+        if steps > MAX_CONTROL_STEPS:
+            raise ValueError(
+                f"duration_s: {self.duration_s:g} s is {steps} control steps at tau_s = {self.tau_s:g} s; "
+                f"at most {MAX_CONTROL_STEPS} are allowed"
+            )
+        return self
+
+    @model_validator(mode="after")
+    def _obstacles_placed(self) -> Scenario:
+        total = len(self.obstacles) + (self.random_obstacles.count if self.random_obstacles else 0)
+        if total > MAX_OBSTACLES:
+            raise ValueError(f"obstacles: {total} in all (with random_obstacles); at most {MAX_OBSTACLES}")
+        if self.random_obstacles is not None:
+            placed = len(self.obstacle_specs()) - len(self.obstacles)
+            if placed < self.random_obstacles.count:
+                raise ValueError(
+                    f"random_obstacles: placed only {placed} of {self.random_obstacles.count} obstacles "
+                    "clear of the start, the goal and each other; widen x_range_m / y_range_m or lower "
+                    "count, radius_range_m or keep_clear_m"
+                )
+        return self
+
+    @model_validator(mode="after")
+    def _start_and_goal_clear(self) -> Scenario:
+        r_robot = self.robot.radius()
+        points = [("robot.start", self.robot.start)]
+        if self.reference.goal is not None:
+            points.append(("reference.goal", self.reference.goal))
+        for i, ob in enumerate(self.obstacle_specs()):
+            for label, pose in points:
+                gap = math.hypot(pose.x_m - ob.x_m, pose.y_m - ob.y_m) - ob.radius_m - r_robot
+                if gap <= 0:
+                    raise ValueError(
+                        f"{label} ({pose.x_m:g}, {pose.y_m:g}) lies inside obstacle {i} at "
+                        f"({ob.x_m:g}, {ob.y_m:g}) r {ob.radius_m:g} m with robot radius {r_robot:.3f} m"
+                    )
+        return self
+
+    def obstacle_specs(self) -> list[ObstacleSpec]:
+        specs = [o.spec() for o in self.obstacles]
+        if self.random_obstacles is not None:
+            keep = [(self.robot.start.x_m, self.robot.start.y_m)]
+            if self.reference.goal is not None:
+                keep.append((self.reference.goal.x_m, self.reference.goal.y_m))
+            specs += self.random_obstacles.specs(keep)
+        return specs
+
+    def with_overrides(
+        self, horizon: int | None = None, gamma: float | None = None, seed: int | None = None
+    ) -> Scenario:
+        """This scenario with command-line overrides applied and validated by the same schema
+        (so `--horizon 500` is the same one-line error as `horizon: 500` in the file)."""
+        data = self.model_dump()
+        if horizon is not None:
+            data["controller"]["horizon"] = horizon
+        if gamma is not None:
+            data["controller"]["gamma"] = gamma
+        if seed is not None:
+            data["seed"] = seed
+        return scenario_from_data(data, "override")
+
+    def reference_object(self) -> Reference:
+        if self.reference.goal is not None:
+            g = self.reference.goal
+            return SetPoint(g.x_m, g.y_m, g.yaw_rad)
+        c = self.reference.circle
+        return CircleTrajectory(c.radius_m, c.angular_rate_radps, c.center_x_m, c.center_y_m, c.phase_rad)
+
+    def controller_config(
+        self, safety: SafetyConstraint, horizon: int | None = None, gamma: float | None = None
+    ) -> NMPCConfig:
+        # ControllerSpec's fields are NMPCConfig's fields by name; `solver` names SolverOptions.backend
+        fields = self.controller.model_dump()
+        fields.update(horizon=horizon or fields["horizon"], gamma=fields["gamma"] if gamma is None else gamma)
+        backend = fields.pop("solver")
+        if backend is not None:
+            fields["solver"] = SolverOptions(backend=backend)
+        return NMPCConfig(
+            **fields,
+            tau_s=self.tau_s,
+            safety=safety,
+            robot_radius_m=self.robot.radius(),
+            obstacle_slots=max(len(self.obstacle_specs()), 1),
+        )
+
+    def husky_cbf_config(self, horizon: int | None = None, gamma: float | None = None) -> HuskyCBFConfig:
+        """husky-cbf's configuration: the file's NMPC settings (Relax-CBF), the drive's limits, the
+        robot's identified yaw response and the URDF's footprint."""
+        drive = self.drive.config()
+        yaw = self.robot.yaw_response_params()
+        geometry = load_geometry()
+        slots = min(max(len(self.obstacle_specs()), 1), HuskyCBFConfig.slots)
+        return HuskyCBFConfig(
+            nmpc=self.controller_config("relax-cbf", horizon, gamma),
+            response=RobotResponse(
+                drive.max_linear_accel_mps2,
+                drive.max_angular_accel_radps2,
+                yaw.gain,
+                yaw.time_constant_s,
+                half_separation_m=0.5 * geometry.track_width_m * drive.wheel_separation_multiplier,
+                max_linear_mps=drive.max_linear_mps,
+            ),
+            footprint=Footprint(*geometry.footprint_half_extents_m),
+            omega_cmd_max_radps=drive.max_angular_radps,
+            slots=slots,
+        )
+
+    def make_controller(
+        self, name: str, horizon: int | None = None, gamma: float | None = None
+    ) -> Controller:
+        """The controller called `name` (controllers.CONTROLLER_NAMES) configured for this scenario."""
+        if name == "husky-cbf":
+            return HuskyCBFController(self.husky_cbf_config(horizon, gamma))
+        return NMPCController(self.controller_config(name, horizon, gamma))
+
+    def episode_config(self, seed: int | None = None) -> EpisodeConfig:
+        f = self.friction
+        return EpisodeConfig(
+            start=(self.robot.start.x_m, self.robot.start.y_m, self.robot.start.yaw_rad),
+            tau_s=self.tau_s,
+            duration_s=self.duration_s,
+            world=WorldConfig(
+                physics_hz=self.physics_hz, ground_friction=f.ground, obstacles=tuple(self.obstacle_specs())
+            ),
+            drive=self.drive.config(),
+            wheel_friction=WheelFriction(
+                longitudinal=f.wheel_longitudinal, lateral_scale=f.wheel_lateral_scale
+            ),
+            sensing=SensingConfig(**self.sensing.model_dump()),  # same field names
+            outcomes=Outcomes(**self.success.model_dump()),  # same field names
+            payload_kg=self.robot.payload_kg,
+            seed=self.seed if seed is None else seed,
+        )
+
+
+def excerpt(value: object, limit: int = EXCERPT_CHARS) -> str:
+    """repr(value), cut to `limit` characters: a 1 MB bad value is not echoed whole."""
+    text = repr(value)
+    return text if len(text) <= limit else f"{text[: limit - 3]}... ({len(text)} characters)"
+
+
+def _one_line(error: ValidationError, source: str) -> str:
+    first = error.errors()[0]
+    loc = ".".join(str(x) for x in first["loc"])
+    msg = first["msg"].removeprefix("Value error, ").replace("\n", " ")
+    got = first.get("input")
+    got_text = "" if isinstance(got, dict | list) or got is None else f" (got {excerpt(got)})"
+    others = [".".join(str(x) for x in e["loc"]) or "scenario" for e in error.errors()[1:]]
+    listed = ", ".join(others[:3]) + (", ..." if len(others) > 3 else "")
+    more = f" [+{len(others)} more: {listed}]" if others else ""
+    where = f"{loc}: " if loc else ""  # a whole-scenario check names its fields in its message
+    return f"{source}: {where}{msg}{got_text}{more}"
+
+
+def scenario_from_data(data: dict[str, Any], source: str = "scenario") -> Scenario:
+    """Validate plain data (a parsed file, or `Scenario.model_dump()` with changes) strictly:
+    numbers must be numbers, sequences become tuples where the schema says so. One-line
+    ScenarioError on any problem."""
+    try:
+        text = json.dumps(data, default=str)  # dates and other YAML types become strings: rejected
+    except (TypeError, ValueError) as exc:
+        raise ScenarioError(f"{source}: values the schema cannot hold ({exc})") from None
+    try:
+        return Scenario.model_validate_json(text, strict=True)
+    except ValidationError as exc:
+        raise ScenarioError(_one_line(exc, source)) from None
+    except (OverflowError, ArithmeticError) as exc:  # a last line of defence: never a traceback
+        raise ScenarioError(f"{source}: a value out of any usable range ({exc})") from None
+
+
+def resolve(name_or_path: str) -> Path:
+    """A scenario file path, or the name of a shipped scenario."""
+    path = Path(name_or_path)
+    if path.suffix in (".yaml", ".yml") and (path.exists() or path.is_symlink()):
+        return path
+    if re.fullmatch(NAME_PATTERN, name_or_path):
+        shipped = SCENARIO_DIR / f"{name_or_path}.yaml"
+        if shipped.is_file():
+            return shipped
+    names = ", ".join(sorted(p.stem for p in SCENARIO_DIR.glob("*.yaml")))
+    raise ScenarioError(
+        f"scenario: no file or shipped scenario named {excerpt(name_or_path, 80)} (shipped: {names})"
+    )
+
+
+def load_scenario(name_or_path: str) -> Scenario:
+    """Load and validate a scenario; every problem is a one-line ScenarioError."""
+    path = resolve(name_or_path)
+    try:
+        data = read_scenario_data(path)
+    except ScenarioFileError as exc:
+        raise ScenarioError(str(exc)) from None
+    return scenario_from_data(data, str(path))
+
+
+def shipped_scenarios() -> list[Path]:
+    return sorted(SCENARIO_DIR.glob("*.yaml"))

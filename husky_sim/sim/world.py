@@ -1,0 +1,191 @@
+"""The PyBullet world: ground plane, cylinder obstacles (static or kinematic movers), optional
+arena walls, and the physics clock.
+
+Moving obstacles are kinematic: zero-mass bodies whose pose is set before every physics step from
+their motion (constant velocity, or waypoints followed at a constant speed), so the Husky cannot
+push them and their motion is exactly reproducible.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from controllers import Obstacle
+from husky_sim.sim.bullet import pybullet as p
+
+
+@dataclass(frozen=True)
+class ObstacleSpec:
+    """A cylinder obstacle: centre at t = 0 (m), radius and height (m), and its motion.
+
+    Motion: constant velocity (vx, vy) in m/s, or `waypoints` [(x, y), ...] visited in order at
+    `speed_mps` after the start position, stopping at the last one.
+    """
+
+    x_m: float
+    y_m: float
+    radius_m: float
+    height_m: float = 1.0
+    vx_mps: float = 0.0
+    vy_mps: float = 0.0
+    waypoints: tuple[tuple[float, float], ...] = ()
+    speed_mps: float = 0.0
+
+    def __post_init__(self) -> None:
+        if not self.radius_m > 0:
+            raise ValueError(f"obstacle.radius_m: must be > 0 m, got {self.radius_m}")
+        if not self.height_m > 0:
+            raise ValueError(f"obstacle.height_m: must be > 0 m, got {self.height_m}")
+        if self.waypoints and not self.speed_mps > 0:
+            raise ValueError(f"obstacle.speed_mps: must be > 0 m/s with waypoints, got {self.speed_mps}")
+
+    @property
+    def moving(self) -> bool:
+        return bool(self.waypoints) or self.vx_mps != 0.0 or self.vy_mps != 0.0
+
+    def state_at(self, t_s: float) -> tuple[np.ndarray, np.ndarray]:
+        """Centre (m) and velocity (m/s) at time t_s."""
+        start = np.array([self.x_m, self.y_m])
+        if not self.waypoints:
+            vel = np.array([self.vx_mps, self.vy_mps])
+            return start + vel * t_s, vel
+        travelled = self.speed_mps * t_s
+        points = [start, *(np.asarray(w, dtype=float) for w in self.waypoints)]
+        for a, b in zip(points[:-1], points[1:], strict=True):
+            length = float(np.linalg.norm(b - a))
+            if travelled <= length and length > 0:
+                direction = (b - a) / length
+                return a + direction * travelled, direction * self.speed_mps
+            travelled -= length
+        return points[-1], np.zeros(2)
+
+
+@dataclass(frozen=True)
+class WorldConfig:
+    """Physics rate, ground friction, obstacles and optional square arena (half-size, m)."""
+
+    physics_hz: float = 240.0
+    ground_friction: float = 1.0  # ground plane lateral friction coefficient
+    obstacles: tuple[ObstacleSpec, ...] = ()
+    arena_half_size_m: float | None = None
+    solver_iterations: int = 50
+
+    def __post_init__(self) -> None:
+        if not (self.physics_hz >= 60 and math.isfinite(self.physics_hz)):
+            raise ValueError(f"physics_hz: must be >= 60 Hz, got {self.physics_hz}")
+        if not self.ground_friction > 0:
+            raise ValueError(f"ground_friction: must be > 0, got {self.ground_friction}")
+
+
+class World:
+    """A headless PyBullet world (DIRECT connection; never a GUI)."""
+
+    def __init__(self, config: WorldConfig) -> None:
+        self.config = config
+        self.client = p.connect(p.DIRECT)
+        self.dt_s = 1.0 / config.physics_hz
+        self.time_s = 0.0
+        cid = self.client
+        p.resetSimulation(physicsClientId=cid)
+        p.setGravity(0, 0, -9.81, physicsClientId=cid)
+        p.setPhysicsEngineParameter(
+            fixedTimeStep=self.dt_s,
+            numSolverIterations=config.solver_iterations,
+            deterministicOverlappingPairs=1,
+            physicsClientId=cid,
+        )
+        plane = p.createCollisionShape(p.GEOM_PLANE, physicsClientId=cid)
+        self.ground = p.createMultiBody(0, plane, physicsClientId=cid)
+        p.changeDynamics(self.ground, -1, lateralFriction=config.ground_friction, physicsClientId=cid)
+        self.obstacle_ids: list[int] = [self._add_cylinder(o) for o in config.obstacles]
+        self._static_centres = np.array([[o.x_m, o.y_m] for o in config.obstacles]).reshape(-1, 2)
+        self._moving = [i for i, o in enumerate(config.obstacles) if o.moving]
+        self.wall_ids: list[int] = self._add_arena(config.arena_half_size_m)
+
+    def _add_cylinder(self, spec: ObstacleSpec) -> int:
+        cid = self.client
+        shape = p.createCollisionShape(
+            p.GEOM_CYLINDER, radius=spec.radius_m, height=spec.height_m, physicsClientId=cid
+        )
+        visual = p.createVisualShape(
+            p.GEOM_CYLINDER,
+            radius=spec.radius_m,
+            length=spec.height_m,
+            rgbaColor=[0.8, 0.3, 0.2, 1] if spec.moving else [0.25, 0.25, 0.25, 1],
+            physicsClientId=cid,
+        )
+        return p.createMultiBody(
+            0, shape, visual, basePosition=[spec.x_m, spec.y_m, 0.5 * spec.height_m], physicsClientId=cid
+        )
+
+    def _add_arena(self, half: float | None) -> list[int]:
+        """Four box walls whose inner faces are `half` - 0.1 m from the origin; their half-planes
+        (inward normal n, offset d: inside where n . p <= d) go to `wall_planes`."""
+        self.wall_planes: list[tuple[np.ndarray, float]] = []
+        if half is None:
+            return []
+        cid, thick, height = self.client, 0.1, 0.5
+        ids = []
+        for nx, ny in ((1.0, 0.0), (-1.0, 0.0), (0.0, 1.0), (0.0, -1.0)):
+            extents = [thick, half + thick, height / 2] if nx else [half + thick, thick, height / 2]
+            shape = p.createCollisionShape(p.GEOM_BOX, halfExtents=extents, physicsClientId=cid)
+            centre = [nx * half, ny * half, height / 2]
+            ids.append(p.createMultiBody(0, shape, basePosition=centre, physicsClientId=cid))
+            self.wall_planes.append((np.array([nx, ny]), half - thick))
+        return ids
+
+    def _place_obstacles(self, t_s: float) -> None:
+        for spec, body in zip(self.config.obstacles, self.obstacle_ids, strict=True):
+            if spec.moving:
+                centre, _ = spec.state_at(t_s)
+                p.resetBasePositionAndOrientation(
+                    body,
+                    [centre[0], centre[1], 0.5 * spec.height_m],
+                    [0, 0, 0, 1],
+                    physicsClientId=self.client,
+                )
+
+    def step(self) -> None:
+        """Advance one physics step, moving kinematic obstacles to their pose at the new time."""
+        self._place_obstacles(self.time_s + self.dt_s)
+        p.stepSimulation(physicsClientId=self.client)
+        self.time_s += self.dt_s
+
+    def obstacle_centres(self, t_s: float | None = None) -> np.ndarray:
+        """True obstacle centres (m), shape (n, 2), at time t_s (default: now); the hot path of
+        per-physics-step collision checks, so static centres are cached."""
+        t = self.time_s if t_s is None else t_s
+        centres = self._static_centres.copy()
+        for i in self._moving:
+            centres[i] = self.config.obstacles[i].state_at(t)[0]
+        return centres
+
+    def obstacle_states(self, t_s: float | None = None) -> list[Obstacle]:
+        """True obstacle circles (centre, radius, velocity) at time t_s (default: now)."""
+        t = self.time_s if t_s is None else t_s
+        out = []
+        for spec in self.config.obstacles:
+            centre, vel = spec.state_at(t)
+            out.append(
+                Obstacle(float(centre[0]), float(centre[1]), spec.radius_m, float(vel[0]), float(vel[1]))
+            )
+        return out
+
+    def close(self) -> None:
+        if p.isConnected(self.client):
+            p.disconnect(self.client)
+
+    def __enter__(self) -> World:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+def obstacle_specs_from(obstacles: Sequence[Obstacle], height_m: float = 1.0) -> tuple[ObstacleSpec, ...]:
+    """Constant-velocity obstacle specs from controller-side circles."""
+    return tuple(ObstacleSpec(o.x_m, o.y_m, o.radius_m, height_m, o.vx_mps, o.vy_mps) for o in obstacles)

@@ -1,0 +1,208 @@
+"""Interrupts, the stuck rule, the solve budget and crashed workers: what can corrupt a result.
+
+A signal must end a run within a second with exit 130 / 143 and a summary that says
+`interrupted` (never a normal-looking result); a solver interrupted by a signal must not turn it
+into a fallback; the stuck rule must not call a robot that is being commanded to move idle."""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+import os
+import random
+import signal
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from controllers import NMPCConfig, NMPCController, Obstacle, SetPoint
+from husky_sim.runs.parallel import process_map
+from husky_sim.scenario_file import scenario_yaml
+from husky_sim.sim.metrics import is_stuck_window
+from husky_sim.sim.outcomes import Outcomes
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def _run_cli(args: list[str]) -> subprocess.Popen:
+    return subprocess.Popen(
+        [sys.executable, "-m", "husky_sim.cli", *args],
+        cwd=ROOT,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+
+
+@pytest.mark.slow
+def test_signals_at_random_instants_end_the_run_as_interrupted(tmp_path: Path) -> None:
+    """Seeded random instants: some in start-up (counted from launch), most in the closed loop
+    (counted from the first logged step, so a slow machine cannot turn them into start-up cases;
+    the 30 s tracking episode at N = 5 never stops early and runs 150 steps, several seconds)."""
+    rng = random.Random(2026)
+    cases = [(signal.SIGINT, "start-up", rng.uniform(0.05, 0.6)), (signal.SIGTERM, "start-up", 0.3)]
+    cases += [(signal.SIGINT, "loop", rng.uniform(0.0, 2.0)) for _ in range(3)]
+    cases += [(signal.SIGTERM, "loop", rng.uniform(0.0, 2.0))]
+    for i, (sig, phase, delay_s) in enumerate(cases):
+        out = tmp_path / f"run_{i}"
+        log = out / "log.csv"
+        proc = _run_cli(["run", "husky_circle_tracking", "--horizon", "5", "--out", str(out)])
+        if phase == "loop":
+            deadline = time.monotonic() + 120.0
+            while time.monotonic() < deadline and (not log.exists() or log.read_text().count("\n") < 2):
+                time.sleep(0.02)  # the header and one control step are written
+        time.sleep(delay_s)
+        sent = time.monotonic()
+        proc.send_signal(sig)
+        _, err = proc.communicate(timeout=60)
+        took_s = time.monotonic() - sent
+        label = f"{sig.name} {delay_s:.2f} s into {phase}"
+        # 128 + n through our handler; -n if the signal came before Python ran our code at all
+        assert proc.returncode in (128 + sig, -sig), f"{label}: exit {proc.returncode}\n{err}"
+        assert took_s < 1.0, f"{label}: took {took_s:.2f} s to stop"
+        summary_path = out / "summary.json"
+        if phase == "loop" or summary_path.exists():
+            summary = json.loads(summary_path.read_text())
+            assert summary["outcome"] == "interrupted" and summary["interrupted_by"] == sig.name, label
+            assert summary.get("converged", False) is False, label
+            rows = list(csv.DictReader(log.open())) if log.exists() else []
+            assert len(rows) == summary["steps"], label  # every completed step logged whole, no more
+            assert all(r["status"] != "NonIpopt_Exception_Thrown" for r in rows), label
+        else:  # interrupted before the run folder existed: nothing that could pass for a result
+            assert not log.exists(), label
+
+
+@pytest.mark.slow
+def test_an_interrupted_suite_stops_its_workers_and_writes_no_results(tmp_path: Path) -> None:
+    out = tmp_path / "suite"
+    args = ["suite", "--scenarios", "husky_circle_tracking", "--controllers", "cbf", "relax-cbf"]
+    proc = _run_cli([*args, "--horizons", "5", "--jobs", "2", "--quiet", "--out", str(out)])
+    deadline = time.monotonic() + 60.0
+    while time.monotonic() < deadline and len(list(out.glob("runs/*/log.csv"))) < 2:
+        time.sleep(0.1)  # both workers are in their episodes
+    time.sleep(1.0)
+    sent = time.monotonic()
+    proc.send_signal(signal.SIGINT)
+    _, err = proc.communicate(timeout=60)
+    took_s = time.monotonic() - sent
+    assert proc.returncode == 130, err
+    assert took_s < 1.0, f"took {took_s:.2f} s to stop"
+    assert not (out / "results.csv").exists() and "no results.csv written" in err
+    assert "resource_tracker" not in err  # the quick exit still releases the pool's semaphores
+    summaries = [json.loads(p.read_text()) for p in out.glob("runs/*/summary.json")]
+    assert len(summaries) == 2 and {s["outcome"] for s in summaries} == {"interrupted"}
+    assert {s["interrupted_by"] for s in summaries} == {"SIGTERM"}  # the parent stopped them
+
+
+class _Signalled(BaseException):
+    pass
+
+
+def test_a_signal_during_a_solve_reaches_the_program_not_a_fallback() -> None:
+    """CasADi catches the interrupt inside IPOPT; the controller must deliver it, not brake."""
+    ctrl = NMPCController(NMPCConfig(safety="relax-cbf", horizon=40, gamma=0.1, obstacle_slots=30))
+    obstacles = [Obstacle(0.1 + 0.3 * i, 4.7, 0.3) for i in range(30)]
+    received: list[int] = []
+
+    def handler(signum: int, _frame: object) -> None:
+        received.append(signum)
+        raise _Signalled
+
+    previous = signal.signal(signal.SIGINT, handler)
+    timer = threading.Timer(0.3, os.kill, (os.getpid(), signal.SIGINT))
+    results = []
+    try:
+        timer.start()
+        with pytest.raises(_Signalled):
+            deadline = time.monotonic() + 20.0
+            while time.monotonic() < deadline:  # each solve takes well over 0.3 s
+                results.append(
+                    ctrl.solve(
+                        np.array([0.0, 0.0, math.pi / 2]), SetPoint(0, 10, math.pi / 2), obstacles, 0.0
+                    )
+                )
+    finally:
+        timer.cancel()
+        signal.signal(signal.SIGINT, previous)
+    assert received == [signal.SIGINT]
+    assert all(r.status != "NonIpopt_Exception_Thrown" for r in results)
+
+
+# -- the stuck rule -------------------------------------------------------------------------------
+
+
+def _rows(v_body: float, w_body: float, v_cmd: float, w_cmd: float, fallback: str = "none") -> list[dict]:
+    row = {
+        "v_body_mps": v_body,
+        "omega_body_radps": w_body,
+        "v_cmd_mps": v_cmd,
+        "omega_cmd_radps": w_cmd,
+        "fallback": fallback,
+    }
+    return [dict(row) for _ in range(Outcomes().stuck_window_steps)]
+
+
+def test_stuck_needs_an_idle_robot_and_an_idle_command() -> None:
+    outcomes = Outcomes()
+    assert is_stuck_window(_rows(0.0, 0.0, 0.0, 0.01), outcomes)
+    assert not is_stuck_window(_rows(0.0, 0.0, -1.0, 0.0), outcomes)  # commanded to reverse: ramping up
+    assert not is_stuck_window(_rows(0.0, 0.01, 0.0, 0.3), outcomes)  # turning in place, skid-steer lags
+    assert not is_stuck_window(_rows(0.2, 0.0, 0.0, 0.0), outcomes)  # still rolling
+    assert not is_stuck_window(_rows(0.0, 0.0, 0.0, 0.0)[:-1], outcomes)  # not a full window yet
+
+
+def test_the_window_after_a_fallback_is_not_stuck() -> None:
+    braking = _rows(0.0, 0.0, 0.0, 0.0, fallback="brake")
+    resumed = braking + _rows(0.0, 0.0, 0.0, 0.0)[:3]  # solving again, the drive still at rest
+    assert not is_stuck_window(resumed, Outcomes())
+    assert not is_stuck_window(braking[:1] + _rows(0.0, 0.0, 0.0, 0.0), Outcomes())  # right after one
+    assert is_stuck_window(resumed + _rows(0.0, 0.0, 0.0, 0.0), Outcomes())  # a full window later, it is
+    assert is_stuck_window(braking, Outcomes())  # a solver that keeps failing: stuck all the same
+
+
+# -- the solve budget -----------------------------------------------------------------------------
+
+
+@pytest.mark.slow
+def test_solves_slower_than_tau_are_reported(tmp_path: Path) -> None:
+    """tau = 10 ms with 30 obstacles and N = 20: every IPOPT solve takes longer than tau."""
+    scenario = {
+        "name": "slow_solves",
+        "tau_s": 0.01,
+        "physics_hz": 300.0,
+        "duration_s": 0.1,
+        "robot": {"start": {"x_m": 0.0, "y_m": 0.0}, "radius_margin_m": 0.1},
+        "reference": {"goal": {"x_m": 20.0, "y_m": 0.0}},
+        "obstacles": [{"x_m": 3.0 + i, "y_m": 3.0 + (i % 3), "radius_m": 0.2} for i in range(30)],
+        "controller": {"horizon": 20},
+    }
+    path = tmp_path / "slow.yaml"
+    path.write_text(scenario_yaml(scenario))
+    proc = _run_cli(["run", str(path), "--out", str(tmp_path / "out")])
+    _, err = proc.communicate(timeout=300)
+    assert proc.returncode == 0, err
+    summary = json.loads((tmp_path / "out" / "summary.json").read_text())
+    assert summary["solve_budget_ms"] == pytest.approx(10.0) and summary["solves_over_budget"] > 0
+    assert "took longer than tau = 10 ms" in err
+
+
+# -- worker processes -----------------------------------------------------------------------------
+
+
+def _square_or_die(x: int) -> int:
+    if x < 0:
+        os._exit(3)  # a crash no exception handler sees (like a segfault or the OOM killer)
+    return x * x
+
+
+def test_a_dead_worker_comes_back_as_an_error_in_its_place() -> None:
+    results = process_map(_square_or_die, [2, -1], jobs=2)
+    assert len(results) == 2 and isinstance(results[1], BaseException)
+    assert results[0] == 4 or isinstance(results[0], BaseException)  # the broken pool may take it too
+    assert process_map(_square_or_die, [1, 2, 3], jobs=1) == [1, 4, 9]

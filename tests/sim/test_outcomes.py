@@ -1,0 +1,49 @@
+"""The outcome monitor alone (no physics): the episode's rules, step by step."""
+
+import math
+
+import numpy as np
+
+from controllers import CircleTrajectory, SetPoint
+from husky_sim.sim.outcomes import OutcomeMonitor, Outcomes
+
+GOAL = SetPoint(1.0, 0.0, 0.0)
+
+
+def _row(v: float = 0.0, w: float = 0.0) -> dict[str, object]:
+    return {"v_body_mps": v, "omega_body_radps": w, "v_cmd_mps": v, "omega_cmd_radps": w, "fallback": "none"}
+
+
+def test_reached_needs_the_tolerance_held_and_names_its_entry() -> None:
+    monitor = OutcomeMonitor(GOAL, Outcomes(goal_hold_s=0.3), tau_s=0.1)
+    at_goal, off = np.array([1.05, 0.0, 0.05]), np.array([0.5, 0.0, 0.0])
+    stops = [
+        monitor.update(t, pose, math.inf, []) for t, pose in [(0.1, off), (0.2, at_goal), (0.3, at_goal)]
+    ]
+    assert stops == [False, False, False] and monitor.outcome is None  # held 2 of 3 steps
+    assert monitor.update(0.4, at_goal, math.inf, []) and monitor.outcome == "reached"
+    assert monitor.reached_at == 0.2
+
+
+def test_a_collision_names_the_episode_even_after_reaching() -> None:
+    monitor = OutcomeMonitor(GOAL, Outcomes(goal_hold_s=0.1, stop_early=False), tau_s=0.1)
+    assert not monitor.update(0.1, np.array([1.0, 0.0, 0.0]), 1.0, []) and monitor.outcome == "reached"
+    assert monitor.update(0.2, np.array([1.0, 0.0, 0.0]), 0.0, []) and monitor.outcome == "collided"
+
+
+def test_stuck_only_after_the_grace_time_and_away_from_the_reference() -> None:
+    outcomes = Outcomes(stuck_window_steps=3, stuck_grace_s=0.5)
+    idle, far = [_row()] * 3, np.array([0.0, 0.0, 0.0])
+    early = OutcomeMonitor(GOAL, outcomes, tau_s=0.1)
+    assert not early.update(0.3, far, math.inf, idle) and early.outcome is None
+    late = OutcomeMonitor(GOAL, outcomes, tau_s=0.1)
+    assert late.update(0.6, far, math.inf, idle) and late.outcome == "stuck"
+    turning = OutcomeMonitor(GOAL, outcomes, tau_s=0.1)
+    assert not turning.update(0.6, far, math.inf, [_row(w=0.5)] * 3)  # turning in place is progress
+
+
+def test_a_trajectory_is_never_reached() -> None:
+    circle = CircleTrajectory(2.0, 0.2, 0.0, 0.0, 0.0)
+    monitor = OutcomeMonitor(circle, Outcomes(goal_hold_s=0.1), tau_s=0.1)
+    on_it = np.asarray(circle.state_at(0.1), dtype=float)
+    assert not monitor.update(0.1, on_it, math.inf, []) and monitor.outcome is None

@@ -1,0 +1,124 @@
+"""husky-cbf in PyBullet: every shipped scenario and scenarios it was not tuned on, at N = 5, 7
+and 12, with plain assertions: no collision (physics clearance > 0) and converged (reached the
+goal, or tracked under the suite's tracking definition, husky_sim.sim.metrics). Plus the pieces it is
+made of: the footprint discs, the extended model, guidance and the exact-penalty re-solve."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from controllers import Obstacle
+from controllers.husky_cbf import Footprint
+from controllers.husky_cbf.config import GuidanceConfig, RobotResponse
+from controllers.husky_cbf.footprint import disc_cover
+from controllers.husky_cbf.guidance import Guidance, segment_blocked
+from controllers.husky_cbf.model import extended_step
+from husky_sim.runs.run import run_scenario
+from husky_sim.runs.scenario import load_scenario, shipped_scenarios
+from husky_sim.sim.geometry import load_geometry
+
+UNSEEN = sorted((Path(__file__).parent / "scenarios_unseen").glob("*.yaml"))
+HORIZONS = (5, 7, 12)
+
+
+#: Where husky-cbf does not yet meet the tracking definition, measured (2026-11-23): it never
+#: collides there and tracks to 0.04 m once the movers have gone, but four movers cross the 0.7 m
+#: reference circle in the first 40 s and, stepping aside from them, it comes back to the
+#: reference in 7 to 19 s after it becomes reachable, not within rejoin_s = 5 s. Strict xfails:
+#: the day one passes, the suite says so. This is the open part of issue 10.
+NOT_YET_CONVERGED = {
+    ("paper_dynamic_tracking", 5): "rejoined in 18.9 s, not 5 s (RMSE where judged 0.040 m)",
+    ("paper_dynamic_tracking", 7): "rejoined in 13.8 s, not 5 s (RMSE where judged 0.037 m)",
+    ("paper_dynamic_tracking", 12): "rejoined in 7.0 s, not 5 s (RMSE where judged 0.042 m)",
+}
+
+
+def _cells(paths: list[Path]) -> list[object]:
+    params = []
+    for path in paths:
+        for n in HORIZONS:
+            marks = [pytest.mark.slow]
+            reason = NOT_YET_CONVERGED.get((path.stem, n))
+            if reason:
+                marks.append(pytest.mark.xfail(strict=True, raises=AssertionError, reason=reason))
+            params.append(pytest.param(str(path), n, id=f"{path.stem}-N{n}", marks=marks))
+    return params
+
+
+def _assert_safe_and_converged(summary: dict[str, object]) -> None:
+    """No collision (physics clearance > 0), converged, and the obstacles shaped the run: the
+    obstacle constraint was active or guidance steered round them at some step (a run that
+    neither touched would test nothing)."""
+    measured = (
+        f"outcome {summary['outcome']}, min clearance {summary['min_clearance_m']}, "
+        f"final error {summary['final_position_error_m']:.3f} m, "
+        f"tracking rmse (reachable) {summary.get('tracking_rmse_reachable_m')}, "
+        f"soft steps {summary['soft_constraint_steps']}, fallbacks {summary['fallbacks']}"
+    )
+    assert not summary["collided"] and summary["min_clearance_m"] > 0.0, f"collision ({measured})"
+    assert summary["converged"], f"not converged ({measured})"
+    assert summary["safety_active_steps"] + summary["guided_steps"] > 0, (
+        f"obstacles never mattered ({measured})"
+    )
+
+
+@pytest.mark.parametrize(("scenario", "horizon"), _cells(shipped_scenarios()))
+def test_husky_cbf_passes_every_shipped_scenario(scenario: str, horizon: int) -> None:
+    _assert_safe_and_converged(run_scenario(scenario, "husky-cbf", horizon))
+
+
+@pytest.mark.parametrize(("scenario", "horizon"), _cells(UNSEEN))
+def test_husky_cbf_passes_scenarios_it_was_not_tuned_on(scenario: str, horizon: int) -> None:
+    summary = run_scenario(scenario, "husky-cbf", horizon)
+    _assert_safe_and_converged(summary)
+
+
+def test_unseen_scenarios_are_the_kinds_the_issue_names() -> None:
+    names = {p.stem for p in UNSEEN}
+    assert {"crossing_movers_fast", "gap_with_mover", "start_near_obstacle", "slalom"} <= names
+    for path in UNSEEN:
+        load_scenario(str(path))  # valid files
+
+
+def test_discs_cover_the_urdf_footprint_tighter_than_one_circle() -> None:
+    geometry = load_geometry()
+    footprint = Footprint(*geometry.footprint_half_extents_m)
+    centres, radius = disc_cover(footprint, 0.05)
+    assert len(centres) == 3
+    assert radius < geometry.footprint_radius_m - 0.15  # 0.38 m against 0.57 m
+    # every point of the rectangle lies in some disc
+    xs = np.linspace(-footprint.half_length_m, footprint.half_length_m, 41)
+    ys = np.linspace(-footprint.half_width_m, footprint.half_width_m, 21)
+    gx, gy = np.meshgrid(xs, ys)
+    inside = np.min(np.hypot(gx[..., None] - centres, gy[..., None]), axis=-1) <= radius + 1e-9
+    assert inside.all()
+
+
+def test_extended_model_lags_the_yaw_rate_and_ramps_the_speed() -> None:
+    response = RobotResponse(
+        3.0, 6.0, yaw_gain=0.5, yaw_time_constant_s=0.4, half_separation_m=0.5, max_linear_mps=1.0
+    )
+    step = extended_step(0.1, response)
+    z = np.array([0.0, 0.0, 0.0, 0.0, 1.0, 0.0])  # commanded 1 rad/s, body at rest
+    for _ in range(40):  # 4 s, no acceleration
+        z = np.asarray(step(z, [0.0, 0.0])).reshape(-1)
+    assert z[5] == pytest.approx(0.5, abs=1e-3)  # the yaw rate settles at gain x command
+    z = np.asarray(step(np.zeros(6), [3.0, 0.0])).reshape(-1)
+    assert z[3] == pytest.approx(0.3) and z[0] == pytest.approx(0.015)  # v ramps, x = a t^2 / 2
+
+
+def test_guidance_routes_round_a_blocking_obstacle_and_leaves_a_clear_line_alone() -> None:
+    guidance = Guidance(GuidanceConfig(), inflation_m=0.48)
+    goal = np.array([8.0, 0.0, 0.0])
+    assert guidance.waypoint(np.zeros(2), goal, [Obstacle(4.0, 3.0, 0.5)]) is None
+    blocking = [Obstacle(4.0, 0.1, 0.6)]
+    waypoint = guidance.waypoint(np.zeros(2), goal, blocking)
+    assert waypoint is not None
+    circles = np.array([[4.0, 0.1, 1.08]])
+    assert not segment_blocked(np.zeros(2), np.array([waypoint.x_m, waypoint.y_m]), circles)
+    assert np.min(np.hypot(waypoint.path[:, 0] - 4.0, waypoint.path[:, 1] - 0.1)) > 1.08
+    assert math.hypot(waypoint.path[-1, 0] - 8.0, waypoint.path[-1, 1]) < 0.1
