@@ -22,7 +22,8 @@ from husky_sim import interrupts
 from husky_sim.ros2.node import CONTROLLER_COUNTS, timing_stats
 from husky_sim.ros2.settings import Ros2Settings, check_domain_id, lease_domain_id
 from husky_sim.ros2.sim_robot import DdsRobot, NodeNotFound
-from husky_sim.runs.run import controller_header, prepare_out_dir, run_scenario, write_summary
+from husky_sim.runs.run import controller_header, prepare_out_dir, run_scenario
+from husky_sim.runs.run_folder import SUMMARY_FILE, read_summary, write_summary
 from husky_sim.runs.scenario import Scenario
 from husky_sim.scenario_file import scenario_yaml
 
@@ -40,7 +41,7 @@ def rehearse(
 ) -> dict[str, object]:
     """Run the rehearsal; return the summary (also written to out_dir/summary.json)."""
     prepare_out_dir(out_dir)
-    (out_dir / "summary.json").unlink(missing_ok=True)  # only this rehearsal's may get its transport
+    (out_dir / SUMMARY_FILE).unlink(missing_ok=True)  # only this rehearsal's may get its transport
     # by default a domain of its own: apart from ROS 2's default 0 and from other rehearsals
     domain = lease_domain_id() if domain_id is None else check_domain_id(domain_id, "--domain-id")
     settings = Ros2Settings(use_sim_time=True, domain_id=domain, localhost_only=True)
@@ -71,8 +72,8 @@ def rehearse(
         summary = run_scenario(sc, controller, out_dir=out_dir, implementation=robot, live_port=live_port)
     finally:
         node_summary = _stop_node(node, node_dir)
-        if summary is not None or (out_dir / "summary.json").exists():
-            summary = summary or json.loads((out_dir / "summary.json").read_text())
+        if summary is not None or (out_dir / SUMMARY_FILE).exists():
+            summary = summary or read_summary(out_dir)
             # what only the controller knows comes from the node (the robot saw commands alone)
             for key in CONTROLLER_COUNTS:
                 summary[key] = node_summary.get(key)

@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import json
-import math
 import re
 import signal
 from pathlib import Path
@@ -12,6 +10,7 @@ from controllers import SAFETY_CONSTRAINTS, Controller, NMPCController, Referenc
 from husky_sim import interrupts
 from husky_sim.interrupts import RunInterrupted
 from husky_sim.runs.foxglove_record import MCAP_NAME, FoxgloveRecorder
+from husky_sim.runs.run_folder import LOG_FILE, TRACE_FILE, write_summary
 from husky_sim.runs.scenario import Scenario, load_scenario
 from husky_sim.sim.episode import run_episode
 from husky_sim.sim.geometry import load_geometry
@@ -55,25 +54,6 @@ def prepare_out_dir(out_dir: Path) -> Path:
     except OSError as exc:
         raise ValueError(f"--out: cannot create {str(out_dir)[:120]!r} ({exc.strerror or exc})") from None
     return out_dir
-
-
-def _json_safe(value: object) -> object:
-    """JSON has no NaN or infinity: a non-finite number (a physics blow-up) is written as null."""
-    if isinstance(value, float) and not math.isfinite(value):
-        return None
-    if isinstance(value, dict):
-        return {k: _json_safe(v) for k, v in value.items()}
-    if isinstance(value, list | tuple):
-        return [_json_safe(v) for v in value]
-    return value
-
-
-def write_summary(out_dir: Path, summary: dict[str, object]) -> None:
-    """summary.json (strict JSON), written whole even if a signal arrives meanwhile."""
-    with interrupts.deferred():
-        tmp = out_dir / "summary.json.tmp"
-        tmp.write_text(json.dumps(_json_safe(summary), indent=2, allow_nan=False) + "\n")
-        tmp.replace(out_dir / "summary.json")
 
 
 def controller_header(
@@ -130,7 +110,7 @@ def run_scenario(
     episode_config = sc.episode_config(seed)
     if out_dir is not None:
         prepare_out_dir(out_dir)
-    log_path = out_dir / "log.csv" if out_dir is not None else None
+    log_path = out_dir / LOG_FILE if out_dir is not None else None
     reference = sc.reference_object()
     recorder = _recorder(sc, reference, out_dir, live_port)
     finished = False
@@ -155,7 +135,7 @@ def run_scenario(
             recorder.close(str(summary["outcome"]), f"after {summary['steps']} steps")
     if out_dir is not None:
         with interrupts.deferred():
-            result.trace.save(out_dir / "trace.npz")
+            result.trace.save(out_dir / TRACE_FILE)
         write_summary(out_dir, summary)
     if result.interrupted_by is not None:
         raise RunInterrupted(result.interrupted_by)

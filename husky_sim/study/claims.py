@@ -28,8 +28,8 @@ from pathlib import Path
 
 import numpy as np
 
+from husky_sim.runs.run_folder import read_log
 from husky_sim.study.suite import OURS, Cell, run_suite
-from husky_sim.viz.plots import read_log
 
 MODELS = ("kinematic", "physics")
 #: The paper's simulated robot circle (m); used for kinematic runs of the paper's sim scenarios.
@@ -130,7 +130,7 @@ class Runs:
         keys = ("t_s", "x_m", "y_m", "ref_x_m", "ref_y_m", "v_cmd_mps", "omega_cmd_radps")
         if "t_s" in row:  # kinematic rows carry their series
             return {k: np.asarray(row[k], dtype=float) for k in keys}
-        log = read_log(self._out_dir / str(row["run_dir"]) / "log.csv")
+        log = read_log(self._out_dir / str(row["run_dir"]))
         return {k: log[k] for k in keys}
 
 

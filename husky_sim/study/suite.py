@@ -9,7 +9,6 @@ deterministic except for the wall-clock columns.
 
 from __future__ import annotations
 
-import csv
 import traceback
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
@@ -19,6 +18,7 @@ from pathlib import Path
 from tqdm import tqdm
 
 from husky_sim.runs.parallel import process_map
+from husky_sim.runs.run_folder import RESULTS_FILE, write_results_csv
 
 #: Columns of results.md (results.csv has every summary key).
 TABLE_COLUMNS = (
@@ -184,7 +184,7 @@ def write_figures(rows: Sequence[dict[str, object]], out_dir: Path, per_run: boo
     for scenario, run_dirs in by_scenario.items():
         written.append(plot_comparison(run_dirs, out_dir / "plots" / f"comparison_{scenario}")[0])
     if done:
-        written += [png for png, _ in plot_tuning_maps(out_dir / "results.csv", out_dir / "plots").values()]
+        written += [png for png, _ in plot_tuning_maps(out_dir / RESULTS_FILE, out_dir / "plots").values()]
     if per_run:
         for run_dir in (d for dirs in by_scenario.values() for d in dirs):
             written += [png for png, _ in plot_run(run_dir, run_dir / "plots").values()]
@@ -206,14 +206,7 @@ def _finish(
 
 def write_results(rows: Sequence[dict[str, object]], out_dir: Path) -> tuple[Path, Path]:
     """Write results.csv (every key) and results.md (TABLE_COLUMNS)."""
-    keys: list[str] = []
-    for row in rows:
-        keys += [k for k in row if k not in keys and k != "traceback" and not isinstance(row[k], list)]
-    csv_path, md_path = out_dir / "results.csv", out_dir / "results.md"
-    with csv_path.open("w", newline="") as f:
-        writer = csv.DictWriter(f, fieldnames=keys, extrasaction="ignore")
-        writer.writeheader()
-        writer.writerows(rows)
+    csv_path, md_path = write_results_csv(rows, out_dir), out_dir / "results.md"
     md_path.write_text(f"{markdown_table(rows)}\n{outcome_legend(rows)}")
     return csv_path, md_path
 

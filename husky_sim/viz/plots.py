@@ -20,8 +20,6 @@ a fixed hash salt so the same input gives the same file. Units: m, s, rad, m/s, 
 
 from __future__ import annotations
 
-import csv
-import json
 import math
 import os
 import re
@@ -42,6 +40,7 @@ from matplotlib.figure import Figure  # noqa: E402
 from matplotlib.image import AxesImage  # noqa: E402
 from matplotlib.patches import Circle, Patch, Rectangle  # noqa: E402
 
+from husky_sim.runs.run_folder import read_log, read_results, read_summary, read_trace  # noqa: E402
 from husky_sim.sim.trace import EpisodeTrace  # noqa: E402
 
 #: Raster resolution (dots per inch); a figure of w x h inches is w*DPI x h*DPI pixels.
@@ -100,7 +99,9 @@ SceneBox = tuple[np.ndarray, np.ndarray]  # (lower-left, upper-right) corners (m
 
 
 class PlotInputError(ValueError):
-    """A run directory or results file that cannot be plotted; the message names the file."""
+    """Runs that cannot be plotted together (none, or of different scenarios), or a scenario a
+    results file does not have; files that cannot be read are husky_sim.runs.run_folder's
+    RunFolderError."""
 
 
 # ---------------------------------------------------------------------------------------------
@@ -142,60 +143,9 @@ class RunRecord:
 
 
 def load_run(run_dir: Path | str) -> RunRecord:
-    """Read a run directory; raises PlotInputError (one line, naming the file) if it is unusable."""
-    run_dir = Path(run_dir)
-    if not run_dir.is_dir():
-        raise PlotInputError(f"{run_dir}: not a run directory")
-    summary = _read_summary(run_dir / "summary.json")
-    log = read_log(run_dir / "log.csv")
-    trace_path = run_dir / "trace.npz"
-    if not trace_path.is_file():
-        raise PlotInputError(f"{trace_path}: missing")
-    try:
-        trace = EpisodeTrace.load(trace_path)
-    except ValueError as exc:
-        raise PlotInputError(str(exc)) from None
-    return RunRecord(run_dir, summary, log, trace)
-
-
-def _read_summary(path: Path) -> dict[str, object]:
-    try:
-        summary = json.loads(path.read_text())
-    except FileNotFoundError:
-        raise PlotInputError(f"{path}: missing") from None
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
-        raise PlotInputError(f"{path}: not a readable JSON summary ({exc})") from None
-    if not isinstance(summary, dict):
-        raise PlotInputError(f"{path}: not a run summary (expected a JSON object)")
-    missing = [k for k in SUMMARY_NEEDED if summary.get(k) is None]
-    if missing:
-        raise PlotInputError(f"{path}: not a run summary (missing {', '.join(missing)})")
-    return summary
-
-
-def read_log(path: Path) -> dict[str, np.ndarray]:
-    try:
-        with path.open(newline="") as handle:
-            rows = list(csv.DictReader(handle))
-    except FileNotFoundError:
-        raise PlotInputError(f"{path}: missing") from None
-    except (OSError, UnicodeDecodeError, csv.Error) as exc:
-        raise PlotInputError(f"{path}: not a readable CSV log ({exc})") from None
-    if not rows:
-        raise PlotInputError(f"{path}: no control steps logged")
-    missing = [c for c in LOG_NEEDED if c not in rows[0]]
-    if missing:
-        raise PlotInputError(f"{path}: not a run log (missing columns {', '.join(missing)})")
-    columns: dict[str, np.ndarray] = {}
-    for name in rows[0]:
-        values = [row[name] for row in rows]
-        try:
-            columns[name] = np.array([float(v) for v in values])
-        except (TypeError, ValueError):
-            if name in LOG_NEEDED:
-                raise PlotInputError(f"{path}: column {name} is not numeric") from None
-            columns[name] = np.array(["" if v is None else v for v in values])
-    return columns
+    """Read a run directory; raises RunFolderError (one line, naming the file) if it is unusable."""
+    summary = read_summary(run_dir, SUMMARY_NEEDED)
+    return RunRecord(Path(run_dir), summary, read_log(run_dir, LOG_NEEDED), read_trace(run_dir))
 
 
 # ---------------------------------------------------------------------------------------------
@@ -852,26 +802,6 @@ def outcome_category(outcome: str, converged: bool) -> str:
     return outcome if outcome in names else "other"
 
 
-def read_results(results_csv: Path | str) -> list[dict[str, str]]:
-    """Rows of a suite's results.csv; raises PlotInputError when it cannot be used."""
-    path = Path(results_csv)
-    try:
-        with path.open(newline="") as handle:
-            reader = csv.DictReader(handle)
-            rows = list(reader)
-            fields = reader.fieldnames or []
-    except FileNotFoundError:
-        raise PlotInputError(f"{path}: missing") from None
-    except (OSError, UnicodeDecodeError, csv.Error) as exc:
-        raise PlotInputError(f"{path}: not a readable CSV ({exc})") from None
-    missing = [c for c in RESULTS_NEEDED if c not in fields]
-    if missing:
-        raise PlotInputError(f"{path}: not a suite results file (missing columns {', '.join(missing)})")
-    if not rows:
-        raise PlotInputError(f"{path}: no runs listed")
-    return rows
-
-
 def _placeable(row: dict[str, str]) -> bool:
     """Whether a results row has a numeric N and gamma (error rows of default cells may not)."""
     return math.isfinite(_number(row["horizon"])) and math.isfinite(_number(row["gamma"]))
@@ -1146,7 +1076,7 @@ def plot_tuning_maps(
     other rows gets no figure. Writes out_dir/tuning_<scenario>_<controller>.png and .svg;
     returns {"<scenario>/<controller>": (png, svg)}. `scenario` limits it to one scenario.
     """
-    rows = read_results(results_csv)
+    rows = read_results(results_csv, RESULTS_NEEDED)
     if scenario is not None:
         rows = [r for r in rows if r["scenario"] == scenario]
         if not rows:

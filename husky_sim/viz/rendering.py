@@ -34,13 +34,10 @@ from __future__ import annotations
 import contextlib
 import ctypes
 import importlib.util
-import json
 import math
 import os
 import sys
 import time
-import zipfile
-import zlib
 from collections.abc import Iterator
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -50,6 +47,7 @@ import numpy as np
 import pybullet_data
 from PIL import Image, ImageDraw, ImageFont
 
+from husky_sim.runs.run_folder import read_summary, read_trace, summary_or_empty, write_summary
 from husky_sim.sim.bullet import pybullet as p
 from husky_sim.sim.geometry import DEFAULT_URDF
 from husky_sim.sim.trace import EpisodeTrace
@@ -83,7 +81,8 @@ _SAFETY_CIRCLE_POINTS = 64  # polyline points of the drawn safety circle (every 
 
 
 class RenderError(ValueError):
-    """A run directory or trace that cannot be rendered, or a renderer that cannot be had."""
+    """A trace that cannot be rendered, or a renderer that cannot be had (a run folder that cannot
+    be read is husky_sim.runs.run_folder's RunFolderError)."""
 
 
 @dataclass(frozen=True)
@@ -886,30 +885,10 @@ def _check_trace(trace: EpisodeTrace) -> None:
 
 
 def load_run_trace(run_dir: Path) -> EpisodeTrace:
-    """The trace of a run directory; RenderError (one line) if the directory or trace is unusable."""
-    run_dir = Path(run_dir)
-    if not run_dir.is_dir():
-        raise RenderError(f"{run_dir}: no such run directory")
-    path = run_dir / "trace.npz"
-    if not path.is_file():
-        raise RenderError(f"{path}: missing (a run directory written by `husky-sim run` has one)")
-    try:
-        trace = EpisodeTrace.load(path)
-    except (ValueError, OSError, EOFError, KeyError, zipfile.BadZipFile, zlib.error) as exc:
-        raise RenderError(
-            str(exc) if str(path) in str(exc) else f"{path}: not a readable trace ({exc})"
-        ) from None
+    """The trace of a run directory, checked for what rendering needs; one-line error otherwise."""
+    trace = read_trace(run_dir)
     _check_trace(trace)
     return trace
-
-
-def summary_or_empty(run_dir: Path) -> dict[str, object]:
-    """The run's summary.json, or {} when it has none readable (a trace renders without it)."""
-    try:
-        summary = json.loads((Path(run_dir) / "summary.json").read_text())
-    except (OSError, ValueError):
-        return {}
-    return summary if isinstance(summary, dict) else {}
 
 
 def run_caption(summary: dict[str, object]) -> str:
@@ -943,8 +922,6 @@ def render_run(
 
 def record_in_summary(run_dir: Path, result: RenderResult) -> None:
     """Add the render's facts under the key `video` of RUN_DIR/summary.json."""
-    from husky_sim.runs.run import write_summary  # the one writer of summary.json
-
-    summary = json.loads((Path(run_dir) / "summary.json").read_text())
+    summary = read_summary(run_dir)
     summary["video"] = result.as_dict()
     write_summary(Path(run_dir), summary)

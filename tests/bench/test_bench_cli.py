@@ -80,6 +80,7 @@ def test_bench_bad_input_exits_2(argv: list[str], capsys: pytest.CaptureFixture[
     assert "error:" in capsys.readouterr().err
 
 
+@pytest.mark.physics
 def test_bench_sim_reports_real_time_factors() -> None:
     from husky_sim.bench.closed_loop import run_sim_bench
 

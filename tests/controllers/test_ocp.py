@@ -155,6 +155,7 @@ def test_heading_is_wrapped_in_cost_and_clf() -> None:
     assert np.allclose(controls, controls[0], atol=1e-5)
 
 
+@pytest.mark.physics
 def test_tracking_many_laps_keeps_converging() -> None:
     """Circle tracking where theta grows without bound (3 laps) keeps the error small."""
     from husky_sim.sim.kinematic import run_kinematic

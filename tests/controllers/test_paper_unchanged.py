@@ -7,6 +7,8 @@ import pytest
 
 from tests.controllers.paper_kinematic_runs import CASES, REFERENCE_FILE, case_key, run_case
 
+pytestmark = pytest.mark.physics  # PyBullet or closed loops throughout (`make test-fast` skips)
+
 
 @pytest.fixture(scope="module")
 def reference() -> dict[str, np.ndarray]:

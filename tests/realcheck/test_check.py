@@ -35,6 +35,8 @@ from husky_sim.runs.scenario import Scenario, load_scenario
 from husky_sim.sim.geometry import load_geometry
 from husky_sim.sim.sensing import SensingConfig, Sensor
 
+pytestmark = pytest.mark.physics  # PyBullet or closed loops throughout (`make test-fast` skips)
+
 
 def _modified(scenario: Scenario, **changes: Any) -> Scenario:
     """A validated copy with nested fields changed: _modified(sc, robot={"radius_m": 0.25})."""

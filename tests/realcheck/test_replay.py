@@ -31,6 +31,8 @@ from husky_sim.runs.scenario import FrictionSpec
 from husky_sim.sim.drive import DriveConfig
 from husky_sim.sim.open_loop import held_commands, simulate_commands
 
+pytestmark = pytest.mark.physics  # PyBullet or closed loops throughout (`make test-fast` skips)
+
 TRUE = SimParams(wheel_separation_multiplier=1.6, ground_friction=0.6)
 START = (1.0, -2.0, 0.3)
 SEGMENTS = ((1.0, 0.8, 0.0), (2.5, 0.8, 0.3), (2.5, 0.5, -0.25), (2.0, 1.0, 0.2))  # (s, m/s, rad/s)

@@ -36,6 +36,8 @@ from husky_sim.runs.foxglove_record import MCAP_NAME, FoxgloveRecorder
 from husky_sim.runs.run import run_scenario
 from husky_sim.runs.scenario import load_scenario
 
+pytestmark = pytest.mark.physics  # PyBullet or closed loops throughout (`make test-fast` skips)
+
 #: Per-step channels of run.mcap (one message per control step) and the one-off ones.
 STEP_CHANNELS = {"/tf", "/robot/pose", "/scene", "/control", "/safety"}
 

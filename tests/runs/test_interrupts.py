@@ -27,6 +27,8 @@ from husky_sim.scenario_file import scenario_yaml
 from husky_sim.sim.metrics import is_stuck_window
 from husky_sim.sim.outcomes import Outcomes
 
+pytestmark = pytest.mark.physics  # PyBullet or closed loops throughout (`make test-fast` skips)
+
 ROOT = Path(__file__).resolve().parents[2]
 
 

@@ -116,6 +116,7 @@ def test_bad_scenarios_give_one_line_naming_the_field(tmp_path: Path, change: di
     assert "\n" not in message and field in message
 
 
+@pytest.mark.physics
 def test_run_writes_summary_and_log(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     out = tmp_path / "run"
     code = main(

@@ -11,6 +11,8 @@ from husky_sim.sim.drive import DriveConfig, SkidSteerDrive
 from husky_sim.sim.robot import HuskyRobot
 from husky_sim.sim.world import World, WorldConfig
 
+pytestmark = pytest.mark.physics  # PyBullet or closed loops throughout (`make test-fast` skips)
+
 PHYSICS_HZ = 240.0
 
 

@@ -15,6 +15,8 @@ from husky_sim.sim.robot import HuskyRobot
 from husky_sim.sim.sensing import SensingConfig
 from husky_sim.sim.world import ObstacleSpec, World, WorldConfig
 
+pytestmark = pytest.mark.physics  # PyBullet or closed loops throughout (`make test-fast` skips)
+
 GOAL = SetPoint(8.0, 0.0, 0.0)
 #: A cylinder driving head-on at the Husky, 0.2 m off its straight path.
 HEAD_ON = ObstacleSpec(6.0, 0.2, 0.3, vx_mps=-0.4)

@@ -194,6 +194,7 @@ def _base_link_pose(client: int, robot: int) -> tuple[np.ndarray, np.ndarray]:
     return np.asarray(pos), np.asarray(p.getEulerFromQuaternion(orn))
 
 
+@pytest.mark.physics
 def test_pybullet_masses_and_inertia(client: int, geometry: RobotGeometry) -> None:
     _, robot = _load_robot(client, geometry.base_height_m + 0.02)
     links = range(-1, p.getNumJoints(robot, physicsClientId=client))
@@ -207,6 +208,7 @@ def test_pybullet_masses_and_inertia(client: int, geometry: RobotGeometry) -> No
     assert tuple(names) == WHEEL_JOINTS
 
 
+@pytest.mark.physics
 def test_pybullet_robot_rests_on_its_wheels(client: int, geometry: RobotGeometry) -> None:
     plane, robot = _load_robot(client, geometry.base_height_m + 0.02)
     steps = 240  # 1 s at the default 240 Hz

@@ -9,6 +9,8 @@ from husky_sim.sim.episode import EpisodeConfig, run_episode
 from husky_sim.sim.sensing import SensingConfig, Sensor
 from husky_sim.sim.world import ObstacleSpec, World, WorldConfig
 
+pytestmark = pytest.mark.physics  # PyBullet or closed loops throughout (`make test-fast` skips)
+
 
 def test_waypoint_obstacle_follows_its_path_and_stops() -> None:
     spec = ObstacleSpec(0.0, 0.0, 0.3, waypoints=((2.0, 0.0), (2.0, 1.0)), speed_mps=0.5)

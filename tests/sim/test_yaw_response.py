@@ -97,6 +97,7 @@ def identified(tmp_path_factory: pytest.TempPathFactory) -> dict[str, object]:
     return read_scenario_data(path)
 
 
+@pytest.mark.physics
 def test_identification_in_pybullet(identified: dict[str, object]) -> None:
     assert 0.3 <= identified["gain"] <= 0.7  # the README's 0.50 to 0.61 steady yaw-rate ratio, lagged
     assert 0.1 <= identified["time_constant_s"] <= 1.5
@@ -211,6 +212,7 @@ def drive_csv(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, np.ndarra
     return path, track.body_velocity[idx, 1]
 
 
+@pytest.mark.physics
 def test_replay_fit_reports_the_yaw_response(
     drive_csv: tuple[Path, np.ndarray], tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:

@@ -21,6 +21,8 @@ from husky_sim.runs.run import run_scenario
 from husky_sim.runs.scenario import load_scenario, shipped_scenarios
 from husky_sim.sim.geometry import load_geometry
 
+pytestmark = pytest.mark.physics  # PyBullet or closed loops throughout (`make test-fast` skips)
+
 UNSEEN = sorted((Path(__file__).parent / "scenarios_unseen").glob("*.yaml"))
 HORIZONS = (5, 7, 12)
 

@@ -25,6 +25,8 @@ from husky_sim.study.claims import (
 )
 from husky_sim.study.suite import Cell
 
+pytestmark = pytest.mark.physics  # PyBullet or closed loops throughout (`make test-fast` skips)
+
 # (claim, kinematic verdict, PyBullet verdict), as measured on 2026-11-23.
 EXPECTED = [
     (

@@ -19,6 +19,8 @@ from controllers import NMPCConfig, NMPCController
 from husky_sim.runs.paper_problems import PAPER_POINT_STABILISATION as PROBLEM
 from husky_sim.sim.kinematic import KinematicEpisode, run_kinematic
 
+pytestmark = pytest.mark.physics  # PyBullet or closed loops throughout (`make test-fast` skips)
+
 #: clearance is exactly 0 when a constraint holds with equality; IPOPT meets it to ~1e-9.
 CONTACT_TOL_M = 1e-6
 

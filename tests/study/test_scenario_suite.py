@@ -24,6 +24,8 @@ from husky_sim.runs.run import run_scenario
 from husky_sim.runs.scenario import Scenario, load_scenario, shipped_scenarios
 from husky_sim.study.suite import Cell, standard_matrix
 
+pytestmark = pytest.mark.physics  # PyBullet or closed loops throughout (`make test-fast` skips)
+
 TABLE_PATH = Path(__file__).with_name("scenario_expectations.yaml")
 OUTCOMES = {"reached", "tracking", "stuck", "timeout", "collided"}
 #: The solver the table was measured with: the paper's (controllers.backends.ipopt).

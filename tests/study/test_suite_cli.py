@@ -28,6 +28,8 @@ from husky_sim.study.claims import (
 )
 from husky_sim.study.suite import Cell, markdown_table, matrix, run_suite, standard_matrix
 
+pytestmark = pytest.mark.physics  # PyBullet or closed loops throughout (`make test-fast` skips)
+
 
 def _short_scenario(tmp_path: Path, name: str, duration_s: float) -> Path:
     data = yaml.safe_load(resolve(name).read_text())

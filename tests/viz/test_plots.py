@@ -22,6 +22,7 @@ from matplotlib.patches import Circle
 
 from husky_sim.cli import main
 from husky_sim.runs.run import run_scenario
+from husky_sim.runs.run_folder import read_results
 from husky_sim.runs.scenario import load_scenario
 from husky_sim.sim.trace import EpisodeTrace
 from husky_sim.viz.plots import (
@@ -42,12 +43,13 @@ from husky_sim.viz.plots import (
     plot_comparison,
     plot_run,
     plot_tuning_maps,
-    read_results,
     third_missing_reason,
     tuning_figure,
     tuning_grid,
     xy_figure,
 )
+
+pytestmark = pytest.mark.physics  # PyBullet or closed loops throughout (`make test-fast` skips)
 
 SCENARIO = "husky_point_stabilisation"
 

@@ -19,6 +19,7 @@ from PIL import ImageFont
 
 from husky_sim.cli import main
 from husky_sim.runs.run import run_scenario
+from husky_sim.runs.run_folder import summary_or_empty
 from husky_sim.runs.scenario import load_scenario, resolve
 from husky_sim.sim.episode import compare_logs
 from husky_sim.viz.rendering import (
@@ -42,9 +43,10 @@ from husky_sim.viz.rendering import (
     render_run,
     run_outcome,
     scale_bar_length_m,
-    summary_or_empty,
     top_camera,
 )
+
+pytestmark = pytest.mark.physics  # PyBullet or closed loops throughout (`make test-fast` skips)
 
 DURATION_S = 2.0
 FPS = 15.0
