@@ -183,7 +183,7 @@ def run_scenario_kinematic(
     import numpy as np
 
     from controllers import Obstacle, SetPoint
-    from husky_sim.sim.kinematic import GoalTolerance, run_kinematic
+    from husky_sim.sim.kinematic import run_kinematic
     from husky_sim.sim.metrics import (
         NO_TRACKING_FIELDS,
         count_reversals,
@@ -205,6 +205,7 @@ def run_scenario_kinematic(
     obstacles = [Obstacle(o.x_m, o.y_m, o.radius_m, o.vx_mps, o.vy_mps) for o in specs]
     reference = sc.reference_object()
     s = sc.success
+    outcomes = sc.episode_config().outcomes
     ep = run_kinematic(
         NMPCController(config),
         (sc.robot.start.x_m, sc.robot.start.y_m, sc.robot.start.yaw_rad),
@@ -213,12 +214,11 @@ def run_scenario_kinematic(
         sc.tau_s,
         sc.duration_s,
         config.robot_radius_m,
-        GoalTolerance(s.goal_position_m, s.goal_heading_rad, s.goal_hold_s),
+        outcomes,
     )
     is_setpoint = isinstance(reference, SetPoint)
     refs = np.array([reference.state_at(t) for t in ep.times_s])
     errors = np.hypot(*(ep.states[:, :2] - refs[:, :2]).T)
-    outcomes = sc.episode_config().outcomes
     rmse = None if is_setpoint else tracking_rmse(errors, ep.times_s, s.tracking_settle_s)
     window = ep.controls[-s.stuck_window_steps :]
     idle = is_idle(window[:, 0], window[:, 1], outcomes)

@@ -118,6 +118,11 @@ ObstacleRadius = _real(0.0, 20.0, "m", lo_open=True)
 Seed = _whole(0, 2**32 - 1)
 
 
+def _diagonal(matrix: tuple[tuple[float, ...], ...]) -> tuple[float, ...]:
+    """The diagonal of a weight matrix (a scenario file gives diagonal weights only)."""
+    return tuple(float(matrix[i][i]) for i in range(len(matrix)))
+
+
 class _Strict(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True, strict=True)
 
@@ -288,23 +293,23 @@ class RobotSpec(_Strict):
 
 
 class ControllerSpec(_Strict):
-    """NMPC parameters; omitted ones take the paper's simulation defaults (NMPCConfig).
+    """NMPC parameters; omitted ones take the paper's simulation defaults, NMPCConfig's own.
 
     Commanded limits may exceed the Husky's (the audit of `husky-sim check` flags that), within
     what a command can physically mean."""
 
-    horizon: _whole(1, 50, "steps") = 5
-    gamma: _real(0.0, 1.0) = 0.1
-    alpha: _real(0.0, 1.0) = 0.3
-    state_weight: tuple[Weight, Weight, Weight] = (10.0, 15.0, 0.7)
-    input_weight: tuple[Weight, Weight] = (1.0, 0.1)
-    clf_weight: tuple[Weight, Weight, Weight] = (1.0, 1.0, 1.0)
-    clf_slack_weight: Weight = 70.0
-    decay_slack_weight: Weight = 10.0
-    v_min_mps: _real(-5.0, 0.0, "m/s") = -1.0
-    v_max_mps: _real(0.0, 5.0, "m/s", lo_open=True) = 1.0
-    omega_max_radps: _real(0.0, 10.0, "rad/s", lo_open=True) = math.pi / 4
-    obstacle_prediction: Literal["constant-velocity", "frozen"] = "constant-velocity"
+    horizon: _whole(1, 50, "steps") = NMPCConfig.horizon
+    gamma: _real(0.0, 1.0) = NMPCConfig.gamma
+    alpha: _real(0.0, 1.0) = NMPCConfig.alpha
+    state_weight: tuple[Weight, Weight, Weight] = _diagonal(NMPCConfig.state_weight)
+    input_weight: tuple[Weight, Weight] = _diagonal(NMPCConfig.input_weight)
+    clf_weight: tuple[Weight, Weight, Weight] = _diagonal(NMPCConfig.clf_weight)
+    clf_slack_weight: Weight = NMPCConfig.clf_slack_weight
+    decay_slack_weight: Weight = NMPCConfig.decay_slack_weight
+    v_min_mps: _real(-5.0, 0.0, "m/s") = NMPCConfig.v_min_mps
+    v_max_mps: _real(0.0, 5.0, "m/s", lo_open=True) = NMPCConfig.v_max_mps
+    omega_max_radps: _real(0.0, 10.0, "rad/s", lo_open=True) = NMPCConfig.omega_max_radps
+    obstacle_prediction: Literal["constant-velocity", "frozen"] = NMPCConfig.obstacle_prediction
     #: NLP solver (controllers.backends); omitted: the controllers' default (SolverOptions)
     solver: Literal["ipopt", "fatrop"] | None = None
 
@@ -325,29 +330,36 @@ class DriveSpec(_Strict):
 
 
 class FrictionSpec(_Strict):
-    ground: _real(0.01, 5.0) = 1.0
-    wheel_longitudinal: _real(0.01, 5.0) = 1.0
-    wheel_lateral_scale: _real(0.01, 5.0) = 1.0
+    """Ground and wheel friction; omitted ones keep the simulator's defaults."""
+
+    ground: _real(0.01, 5.0) = WorldConfig.ground_friction
+    wheel_longitudinal: _real(0.01, 5.0) = WheelFriction.longitudinal
+    wheel_lateral_scale: _real(0.01, 5.0) = WheelFriction.lateral_scale
 
 
 class SensingSpec(_Strict):
-    pose_xy_std_m: _real(0.0, 5.0, "m") = 0.0
-    pose_yaw_std_rad: _real(0.0, math.pi, "rad") = 0.0
-    obstacle_xy_std_m: _real(0.0, 5.0, "m") = 0.0
-    latency_steps: _whole(0, 20, "steps") = 0
-    obstacle_velocity_scale: _real(0.0, 5.0) = 1.0  # reported / true obstacle velocity
+    """husky_sim.sim.sensing.SensingConfig: the same fields, its defaults, and their ranges."""
+
+    pose_xy_std_m: _real(0.0, 5.0, "m") = SensingConfig.pose_xy_std_m
+    pose_yaw_std_rad: _real(0.0, math.pi, "rad") = SensingConfig.pose_yaw_std_rad
+    obstacle_xy_std_m: _real(0.0, 5.0, "m") = SensingConfig.obstacle_xy_std_m
+    latency_steps: _whole(0, 20, "steps") = SensingConfig.latency_steps
+    obstacle_velocity_scale: _real(0.0, 5.0) = SensingConfig.obstacle_velocity_scale
 
 
 class SuccessSpec(_Strict):
-    goal_position_m: _real(0.0, 10.0, "m", lo_open=True) = 0.1
-    goal_heading_rad: _real(0.0, math.pi, "rad", lo_open=True) = 0.1
-    goal_hold_s: _real(0.0, 3600.0, "s", lo_open=True) = 1.0
-    tracking_rmse_m: _real(0.0, 10.0, "m", lo_open=True) = 0.3
-    tracking_settle_s: _real(0.0, 3600.0, "s") = 10.0
-    rejoin_s: _real(0.0, 3600.0, "s") = 5.0  # why 5 s: husky_sim.sim.episode.Outcomes
-    stuck_window_steps: _whole(1, 1000, "steps") = 10
-    stuck_speed_mps: _real(0.0, 1.0, "m/s", lo_open=True) = 0.05
-    stuck_yaw_rate_radps: _real(0.0, 2.0, "rad/s", lo_open=True) = 0.05
+    """husky_sim.sim.outcomes.Outcomes (what each threshold means and why): the same fields, its
+    defaults, and their ranges."""
+
+    goal_position_m: _real(0.0, 10.0, "m", lo_open=True) = Outcomes.goal_position_m
+    goal_heading_rad: _real(0.0, math.pi, "rad", lo_open=True) = Outcomes.goal_heading_rad
+    goal_hold_s: _real(0.0, 3600.0, "s", lo_open=True) = Outcomes.goal_hold_s
+    tracking_rmse_m: _real(0.0, 10.0, "m", lo_open=True) = Outcomes.tracking_rmse_m
+    tracking_settle_s: _real(0.0, 3600.0, "s") = Outcomes.tracking_settle_s
+    rejoin_s: _real(0.0, 3600.0, "s") = Outcomes.rejoin_s
+    stuck_window_steps: _whole(1, 1000, "steps") = Outcomes.stuck_window_steps
+    stuck_speed_mps: _real(0.0, 1.0, "m/s", lo_open=True) = Outcomes.stuck_speed_mps
+    stuck_yaw_rate_radps: _real(0.0, 2.0, "rad/s", lo_open=True) = Outcomes.stuck_yaw_rate_radps
 
 
 class Scenario(_Strict):
@@ -356,9 +368,9 @@ class Scenario(_Strict):
     name: Annotated[str, BeforeValidator(_name)]
     description: Annotated[str, Field(max_length=500, pattern=r"^[^\x00-\x1f\x7f]*$")] = ""
     seed: Seed = 0
-    tau_s: _real(0.0005, 1.0, "s") = 0.1  # down to one physics step at the fastest physics_hz
-    duration_s: _real(0.0, 3600.0, "s", lo_open=True) = 30.0
-    physics_hz: _real(60.0, 2000.0, "Hz") = 240.0
+    tau_s: _real(0.0005, 1.0, "s") = EpisodeConfig.tau_s  # down to one physics step at 2,000 Hz
+    duration_s: _real(0.0, 3600.0, "s", lo_open=True) = EpisodeConfig.duration_s
+    physics_hz: _real(60.0, 2000.0, "Hz") = WorldConfig.physics_hz
     robot: RobotSpec
     reference: ReferenceSpec
     obstacles: list[ObstacleEntry] = Field(default_factory=list, max_length=MAX_OBSTACLES)

@@ -15,15 +15,7 @@ import numpy as np
 from controllers import Controller, Obstacle, Reference, SetPoint
 from controllers.model import step, wrap_angle
 from husky_sim.sim.metrics import count_reversals
-
-
-@dataclass(frozen=True)
-class GoalTolerance:
-    """Point stabilisation counts as reached when both errors stay below these for hold_s."""
-
-    position_m: float = 0.1
-    heading_rad: float = 0.1
-    hold_s: float = 1.0
+from husky_sim.sim.outcomes import Outcomes
 
 
 @dataclass
@@ -98,13 +90,14 @@ def run_kinematic(
     tau_s: float,
     duration_s: float,
     robot_radius_m: float,
-    tolerance: GoalTolerance | None = None,
+    outcomes: Outcomes | None = None,
 ) -> KinematicEpisode:
-    """Run the closed loop for duration_s (s); a set-point run stops once the goal is held."""
-    tolerance = tolerance or GoalTolerance()
+    """Run the closed loop for duration_s (s); a set-point run stops once the goal is held within
+    the goal tolerances of `outcomes` (position m, heading rad, for goal_hold_s)."""
+    outcomes = outcomes or Outcomes()
     controller.reset()
     steps = int(round(duration_s / tau_s))
-    hold_steps = max(int(round(tolerance.hold_s / tau_s)), 1)
+    hold_steps = max(int(round(outcomes.goal_hold_s / tau_s)), 1)
     state = np.asarray(start, dtype=float)
     states, controls, clear, sh, active, solve_t, statuses = [state], [], [], [], [], [], []
     clear.append(clearance(state, obstacles_at(obstacles, 0.0), robot_radius_m))
@@ -124,8 +117,8 @@ def run_kinematic(
         if isinstance(reference, SetPoint):
             goal = reference.state_at(t + tau_s)
             ok = (
-                np.hypot(*(state[:2] - goal[:2])) <= tolerance.position_m
-                and abs(wrap_angle(state[2] - goal[2])) <= tolerance.heading_rad
+                np.hypot(*(state[:2] - goal[:2])) <= outcomes.goal_position_m
+                and abs(wrap_angle(state[2] - goal[2])) <= outcomes.goal_heading_rad
             )
             in_tol = in_tol + 1 if ok else 0
             if in_tol == 1:

@@ -8,8 +8,14 @@ from pathlib import Path
 import pytest
 import yaml
 
+from controllers import NMPCConfig
 from husky_sim.cli import main
-from husky_sim.runs.scenario import ScenarioError, load_scenario, shipped_scenarios
+from husky_sim.runs.scenario import ScenarioError, load_scenario, scenario_from_data, shipped_scenarios
+from husky_sim.sim.episode import EpisodeConfig
+from husky_sim.sim.outcomes import Outcomes
+from husky_sim.sim.robot import WheelFriction
+from husky_sim.sim.sensing import SensingConfig
+from husky_sim.sim.world import WorldConfig
 
 SUMMARY_KEYS = {
     "scenario",
@@ -152,3 +158,23 @@ def test_scenarios_lists_every_file(capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["scenarios"]) == 0
     lines = capsys.readouterr().out.strip().splitlines()
     assert len(lines) == len(shipped_scenarios())
+
+
+def test_an_omitted_setting_takes_the_run_time_default() -> None:
+    """Each default exists once, in the run-time dataclass: a scenario that gives only what it must
+    resolves to exactly the defaults of NMPCConfig, EpisodeConfig, SensingConfig and Outcomes."""
+    data = {
+        "name": "minimal",
+        "robot": {"start": {"x_m": 0.0, "y_m": 0.0}, "radius_m": 0.6},
+        "reference": {"goal": {"x_m": 5.0, "y_m": 0.0}},
+    }
+    sc = scenario_from_data(data, "test")
+    assert sc.controller_config("cbf") == NMPCConfig(safety="cbf", robot_radius_m=0.6, obstacle_slots=1)
+    episode = sc.episode_config()
+    assert (episode.tau_s, episode.duration_s) == (EpisodeConfig.tau_s, EpisodeConfig.duration_s)
+    assert episode.sensing == SensingConfig() and episode.outcomes == Outcomes()
+    assert episode.wheel_friction == WheelFriction()
+    assert (episode.world.physics_hz, episode.world.ground_friction) == (
+        WorldConfig.physics_hz,
+        WorldConfig.ground_friction,
+    )
