@@ -19,8 +19,8 @@ from husky_sim.cli.common import (
 def cmd_check(args: argparse.Namespace) -> int:
     from pathlib import Path
 
-    from husky_sim.realcheck.check import CheckOptions, default_out_dir, run_check
-    from husky_sim.runs.run import prepare_out_dir
+    from husky_sim.realcheck.check import CheckOptions, run_check
+    from husky_sim.runs.run_folder import default_check_dir, prepare_out_dir
     from husky_sim.runs.scenario import load_scenario
 
     # integers are range-checked by CheckOptions, so "--samples 0" is one line, exit 2
@@ -40,7 +40,7 @@ def cmd_check(args: argparse.Namespace) -> int:
     seed = sc.seed if args.seed is None else args.seed
     interrupts.begin_run()  # workers are stopped, not orphaned, on a signal
     out = prepare_out_dir(
-        Path(args.out or default_out_dir(sc.name, args.controller, horizon, args.samples, seed))
+        Path(args.out or default_check_dir(sc.name, args.controller, horizon, args.samples, seed))
     )
     report = run_check(sc, options, out, log=print)
     s = report.stats

@@ -11,7 +11,7 @@ from husky_sim.cli.common import jobs_arg, path_arg
 def cmd_paper(args: argparse.Namespace) -> int:
     from pathlib import Path
 
-    from husky_sim.runs.run import prepare_out_dir
+    from husky_sim.runs.run_folder import prepare_out_dir
     from husky_sim.study.claims import run_paper_report
 
     interrupts.begin_run()  # workers are stopped, not orphaned, on a signal
@@ -25,9 +25,11 @@ def cmd_paper(args: argparse.Namespace) -> int:
 
 def add_parsers(sub: argparse._SubParsersAction) -> None:
     """Register `paper`."""
+    from husky_sim.runs.run_folder import PAPER_DIR
+
     paper = sub.add_parser("paper", help="check the paper's claims; writes claims.md")
     paper.add_argument(
-        "--out", type=path_arg, default="results/paper", help="output directory (default results/paper)"
+        "--out", type=path_arg, default=str(PAPER_DIR), help=f"output directory (default {PAPER_DIR})"
     )
     paper.add_argument("--jobs", type=jobs_arg, default=2, help="worker processes (default 2)")
     paper.add_argument("--quiet", action="store_true", help="no progress bar")

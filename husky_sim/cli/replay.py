@@ -11,9 +11,10 @@ def cmd_replay(args: argparse.Namespace) -> int:
     from pathlib import Path
 
     from husky_sim.realcheck.replay import run_replay
+    from husky_sim.runs.run_folder import default_replay_dir
 
     bag = Path(args.bag)
-    out = Path(args.out) if args.out else Path("results") / f"replay__{bag.stem or 'bag'}"
+    out = Path(args.out) if args.out else default_replay_dir(bag)
     lines = run_replay(
         bag,
         out,

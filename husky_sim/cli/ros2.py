@@ -54,7 +54,7 @@ def cmd_serve(args: argparse.Namespace) -> int:
     from pathlib import Path
 
     from husky_sim.ros2.node import serve
-    from husky_sim.runs.run import default_run_dir
+    from husky_sim.runs.run_folder import default_run_dir
     from husky_sim.runs.scenario import load_scenario
 
     interrupts.check()
@@ -98,7 +98,7 @@ def cmd_rehearse(args: argparse.Namespace) -> int:
     from pathlib import Path
 
     from husky_sim.ros2.rehearse import rehearse
-    from husky_sim.runs.run import default_run_dir
+    from husky_sim.runs.run_folder import default_run_dir
     from husky_sim.runs.scenario import load_scenario
 
     interrupts.check()

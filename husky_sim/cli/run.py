@@ -21,7 +21,8 @@ from husky_sim.cli.render import add_render_arguments, options_from_args
 def cmd_run(args: argparse.Namespace) -> int:
     from pathlib import Path
 
-    from husky_sim.runs.run import default_run_dir, run_scenario
+    from husky_sim.runs.run import run_scenario
+    from husky_sim.runs.run_folder import default_run_dir
     from husky_sim.runs.scenario import load_scenario
     from husky_sim.viz.rendering import record_in_summary, render_run
 

@@ -20,7 +20,7 @@ from husky_sim.cli.common import (
 def cmd_suite(args: argparse.Namespace) -> int:
     from pathlib import Path
 
-    from husky_sim.runs.run import prepare_out_dir
+    from husky_sim.runs.run_folder import prepare_out_dir
     from husky_sim.runs.scenario import load_scenario, shipped_scenarios
     from husky_sim.study.suite import markdown_table, matrix, run_suite, write_figures
 
@@ -55,6 +55,8 @@ def cmd_suite(args: argparse.Namespace) -> int:
 
 def add_parsers(sub: argparse._SubParsersAction) -> None:
     """Register `suite`."""
+    from husky_sim.runs.run_folder import SUITE_DIR
+
     suite = sub.add_parser("suite", help="run a scenario x controller x horizon x gamma matrix in parallel")
     suite.add_argument("--scenarios", nargs="+", default=None, help="names or paths (default: all shipped)")
     suite.add_argument(
@@ -65,7 +67,7 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     suite.add_argument("--seed", type=seed_arg, default=None, help="seed (default: the file's)")
     suite.add_argument("--jobs", type=jobs_arg, default=2, help="worker processes (default 2)")
     suite.add_argument(
-        "--out", type=path_arg, default="results/suite", help="output directory (default results/suite)"
+        "--out", type=path_arg, default=str(SUITE_DIR), help=f"output directory (default {SUITE_DIR})"
     )
     suite.add_argument("--quiet", action="store_true", help="no progress bar")
     suite.add_argument("--plots", action="store_true", help="also every run's own figures")

@@ -402,7 +402,3 @@ def markdown(report: CheckReport, plots: dict[str, str]) -> str:
         _sample_row(r, p) for r, p in list(zip(report.results, report.perturbations, strict=True))[:shown]
     ]
     return "\n".join(lines) + "\n"
-
-
-def default_out_dir(scenario: str, controller: str, horizon: int, samples: int, seed: int) -> Path:
-    return Path("results") / f"check__{scenario}__{controller}__N{horizon}__K{samples}__s{seed}"

@@ -22,8 +22,8 @@ from husky_sim import interrupts
 from husky_sim.ros2.node import CONTROLLER_COUNTS, timing_stats
 from husky_sim.ros2.settings import Ros2Settings, check_domain_id, lease_domain_id
 from husky_sim.ros2.sim_robot import DdsRobot, NodeNotFound
-from husky_sim.runs.run import controller_header, prepare_out_dir, run_scenario
-from husky_sim.runs.run_folder import SUMMARY_FILE, read_summary, write_summary
+from husky_sim.runs.run import controller_header, run_scenario
+from husky_sim.runs.run_folder import SUMMARY_FILE, prepare_out_dir, read_summary, write_summary
 from husky_sim.runs.scenario import Scenario
 from husky_sim.scenario_file import scenario_yaml
 

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import re
 import signal
 from pathlib import Path
 
@@ -10,50 +9,13 @@ from controllers import SAFETY_CONSTRAINTS, Controller, NMPCController, Referenc
 from husky_sim import interrupts
 from husky_sim.interrupts import RunInterrupted
 from husky_sim.runs.foxglove_record import MCAP_NAME, FoxgloveRecorder
-from husky_sim.runs.run_folder import LOG_FILE, TRACE_FILE, write_summary
+from husky_sim.runs.run_folder import LOG_FILE, TRACE_FILE, prepare_out_dir, write_summary
 from husky_sim.runs.scenario import Scenario, load_scenario
 from husky_sim.sim.episode import run_episode
 from husky_sim.sim.geometry import load_geometry
 
-#: Where runs go unless --out says otherwise.
-RESULTS_DIR = Path("results")
-
 #: Kinematic clearance above -this (m) is contact, not collision: IPOPT meets B = 0 to ~1e-9.
 KINEMATIC_CONTACT_TOL_M = 1e-6
-
-
-def _safe_component(text: str) -> str:
-    """A path component made of [A-Za-z0-9_.+-] that cannot climb out of its parent."""
-    cleaned = re.sub(r"[^A-Za-z0-9_.+-]", "_", text).lstrip(".")
-    return cleaned[:80] or "_"
-
-
-def run_dir_name(
-    scenario: str, controller: str, horizon: int, gamma: float, seed: int, kind: str = ""
-) -> str:
-    """The one name of a run's folder: never a path outside its parent, whatever the scenario's
-    name holds (the schema already restricts names; this holds for any caller). `kind` prefixes
-    folders of other commands than `run` (`serve`, `rehearse`)."""
-    prefix = f"{kind}__" if kind else ""
-    return _safe_component(f"{prefix}{scenario}__{controller}__N{horizon}__g{gamma:g}__s{seed}")
-
-
-def default_run_dir(
-    scenario: str, controller: str, horizon: int, gamma: float, seed: int, kind: str = ""
-) -> Path:
-    return RESULTS_DIR / run_dir_name(scenario, controller, horizon, gamma, seed, kind)
-
-
-def prepare_out_dir(out_dir: Path) -> Path:
-    """Create the run directory before anything runs; one-line ValueError naming `--out` if it is
-    an existing file, a special file, or cannot be created (too long a name, no permission)."""
-    try:
-        if out_dir.exists() and not out_dir.is_dir():
-            raise ValueError(f"--out: {str(out_dir)[:120]} exists and is not a directory")
-        out_dir.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise ValueError(f"--out: cannot create {str(out_dir)[:120]!r} ({exc.strerror or exc})") from None
-    return out_dir
 
 
 def controller_header(

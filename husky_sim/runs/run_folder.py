@@ -1,4 +1,4 @@
-"""A run folder on disk, written and read in this one module: `summary.json` (the run's summary,
+"""A run folder on disk, named, written and read in this one module: `summary.json` (the run's summary,
 strict JSON), `log.csv` (one row per control step, written row by row by the episode: its columns
 are husky_sim.sim.episode.LOG_COLUMNS), `trace.npz` (husky_sim.sim.trace) and a suite's
 `results.csv`. Plots, rendering, claims and the suite read runs only through here, and a file that
@@ -9,6 +9,7 @@ from __future__ import annotations
 import csv
 import json
 import math
+import re
 import zipfile
 import zlib
 from collections.abc import Sequence
@@ -19,14 +20,64 @@ import numpy as np
 from husky_sim import interrupts
 from husky_sim.sim.trace import EpisodeTrace
 
+#: Where runs go unless --out says otherwise, and the default folders of the suite and the claims.
+RESULTS_DIR = Path("results")
+SUITE_DIR = RESULTS_DIR / "suite"
+PAPER_DIR = RESULTS_DIR / "paper"
+
 SUMMARY_FILE = "summary.json"
 LOG_FILE = "log.csv"
 TRACE_FILE = "trace.npz"
 RESULTS_FILE = "results.csv"
 
 
+def _safe_component(text: str) -> str:
+    """A path component made of [A-Za-z0-9_.+-] that cannot climb out of its parent."""
+    cleaned = re.sub(r"[^A-Za-z0-9_.+-]", "_", text).lstrip(".")
+    return cleaned[:80] or "_"
+
+
+def run_dir_name(
+    scenario: str, controller: str, horizon: int, gamma: float, seed: int, kind: str = ""
+) -> str:
+    """The one name of a run's folder: never a path outside its parent, whatever the scenario's
+    name holds (the schema already restricts names; this holds for any caller). `kind` prefixes
+    folders of other commands than `run` (`serve`, `rehearse`)."""
+    prefix = f"{kind}__" if kind else ""
+    return _safe_component(f"{prefix}{scenario}__{controller}__N{horizon}__g{gamma:g}__s{seed}")
+
+
+def default_run_dir(
+    scenario: str, controller: str, horizon: int, gamma: float, seed: int, kind: str = ""
+) -> Path:
+    """results/<run_dir_name>: where `run`, `serve` and `rehearse` write unless told."""
+    return RESULTS_DIR / run_dir_name(scenario, controller, horizon, gamma, seed, kind)
+
+
+def default_check_dir(scenario: str, controller: str, horizon: int, samples: int, seed: int) -> Path:
+    """Where `check` writes unless told: one folder per scenario, controller, N, samples and seed."""
+    return RESULTS_DIR / _safe_component(f"check__{scenario}__{controller}__N{horizon}__K{samples}__s{seed}")
+
+
+def default_replay_dir(recording: Path) -> Path:
+    """Where `replay` writes unless told: one folder per recording."""
+    return RESULTS_DIR / _safe_component(f"replay__{Path(recording).stem or 'bag'}")
+
+
 class RunFolderError(ValueError):
     """A run folder or results file that cannot be used; the message is one line naming the file."""
+
+
+def prepare_out_dir(out_dir: Path) -> Path:
+    """Create the run directory before anything runs; one-line ValueError naming `--out` if it is
+    an existing file, a special file, or cannot be created (too long a name, no permission)."""
+    try:
+        if out_dir.exists() and not out_dir.is_dir():
+            raise ValueError(f"--out: {str(out_dir)[:120]} exists and is not a directory")
+        out_dir.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise ValueError(f"--out: cannot create {str(out_dir)[:120]!r} ({exc.strerror or exc})") from None
+    return out_dir
 
 
 def _json_safe(value: object) -> object:

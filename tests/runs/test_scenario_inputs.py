@@ -17,7 +17,7 @@ from hypothesis import strategies as st
 from pydantic import BaseModel
 
 from husky_sim.cli import main
-from husky_sim.runs.run import default_run_dir, run_dir_name
+from husky_sim.runs.run_folder import default_run_dir, run_dir_name
 from husky_sim.runs.scenario import (
     MAX_OBSTACLES,
     Scenario,
