@@ -149,11 +149,11 @@ def run_scenario_kinematic(
     from husky_sim.sim.metrics import (
         NO_TRACKING_FIELDS,
         count_reversals,
-        is_idle,
         judge_tracking,
         reference_reachable,
         tracking_rmse,
     )
+    from husky_sim.sim.outcomes import final_outcome, is_idle
 
     sc = load_scenario(scenario) if isinstance(scenario, str) else scenario
     if controller not in SAFETY_CONSTRAINTS:
@@ -186,14 +186,16 @@ def run_scenario_kinematic(
     idle = is_idle(window[:, 0], window[:, 1], outcomes)
     far = errors[-1] > (s.goal_position_m if is_setpoint else s.tracking_rmse_m)
     collided = bool(obstacles) and ep.min_clearance_m < -KINEMATIC_CONTACT_TOL_M
-    if collided:
-        outcome = "collided"
-    elif is_setpoint and ep.reached:
-        outcome = "reached"
-    elif idle and far:
-        outcome = "stuck"
-    else:
-        outcome = "timeout" if is_setpoint else "tracking"
+    decided = (
+        "collided"
+        if collided
+        else "reached"
+        if is_setpoint and ep.reached
+        else "stuck"
+        if idle and far
+        else None
+    )
+    outcome = final_outcome(decided, collided=collided, is_setpoint=is_setpoint)
     judgement = None
     if not is_setpoint:
         # the robot here is the controller's circle (config.robot_radius_m), not the URDF footprint:

@@ -6,15 +6,12 @@ import signal
 from collections import defaultdict
 from collections.abc import Sequence
 from dataclasses import asdict, dataclass
-from typing import TYPE_CHECKING
 
 import numpy as np
 
 from controllers import Reference
 from controllers.model import wrap_angle
-
-if TYPE_CHECKING:
-    from husky_sim.sim.outcomes import Outcomes
+from husky_sim.sim.outcomes import Outcomes, final_outcome
 
 #: What each outcome word means, for people reading results (results.md, README).
 OUTCOME_MEANINGS = {
@@ -142,39 +139,6 @@ def judge_tracking(
     return TrackingJudgement(rmse, float(np.sum(~reachable)) * tau_s, tuple(rejoins), bool(converged))
 
 
-def is_idle(v: np.ndarray, omega: np.ndarray, outcomes: Outcomes) -> bool:
-    """The stuck rule's motion test: a full window of `stuck_window_steps` whose mean |v| (m/s) and
-    mean |omega| (rad/s) are both below their thresholds (turning in place is not idle)."""
-    return (
-        len(v) == outcomes.stuck_window_steps
-        and float(np.mean(np.abs(v))) < outcomes.stuck_speed_mps
-        and float(np.mean(np.abs(omega))) < outcomes.stuck_yaw_rate_radps
-    )
-
-
-def is_stuck_window(rows: Sequence[dict[str, object]], outcomes: Outcomes) -> bool:
-    """The stuck rule over the last `stuck_window_steps` logged control steps: the robot is idle
-    (measured body velocities, `is_idle`) and the controller is not trying to move it either (the
-    commanded v and omega are idle by the same thresholds: a command the skid-steer cannot yet
-    follow, such as a slow turn in place, is progress). A window that starts right after a solver
-    fallback, or in which the controller resumed after one, is not judged: the drive is ramping up
-    from the brake. A window of nothing but fallbacks (a solver that keeps failing and braking) is
-    judged like any other: that robot is stuck."""
-    n = outcomes.stuck_window_steps
-    window = rows[-n:]
-    if len(window) < n:
-        return False
-    recent = rows[-(n + 1) :]  # the step before the window too: "right after a fallback"
-    resumed = any(
-        a["fallback"] != "none" and b["fallback"] == "none" for a, b in zip(recent, recent[1:], strict=False)
-    )
-    if resumed:
-        return False
-    return is_idle(
-        [r["v_body_mps"] for r in window], [r["omega_body_radps"] for r in window], outcomes
-    ) and is_idle([r["v_cmd_mps"] for r in window], [r["omega_cmd_radps"] for r in window], outcomes)
-
-
 @dataclass(frozen=True)
 class EpisodeMetrics:
     """Headline figures of one episode (units in the names)."""
@@ -256,10 +220,9 @@ def summarise(
     clearance = col["clearance_m"].astype(float)
     min_clear = float(np.min(clearance)) if np.any(np.isfinite(clearance)) else None  # None: no obstacles
     collided = min_clear is not None and min_clear <= 0.0
-    if interrupted_by is not None:
-        outcome = "interrupted"  # never judged as a result, whatever happened before the signal
-    elif outcome is None:
-        outcome = "collided" if collided else ("timeout" if is_setpoint else "tracking")
+    outcome = final_outcome(
+        outcome, collided=collided, is_setpoint=is_setpoint, interrupted=interrupted_by is not None
+    )
     rmse, judgement = None, None
     if not is_setpoint:
         errs = np.hypot(col["x_m"] - col["ref_x_m"], col["y_m"] - col["ref_y_m"])

@@ -12,7 +12,6 @@ import numpy as np
 
 from controllers import Reference, SetPoint
 from controllers.model import wrap_angle
-from husky_sim.sim.metrics import is_stuck_window
 
 
 @dataclass(frozen=True)
@@ -39,6 +38,52 @@ class Outcomes:
     stop_early: bool = True  # end the episode once reached or stuck (else run the full duration)
 
 
+def is_idle(v: np.ndarray, omega: np.ndarray, outcomes: Outcomes) -> bool:
+    """The stuck rule's motion test: a full window of `stuck_window_steps` whose mean |v| (m/s) and
+    mean |omega| (rad/s) are both below their thresholds (turning in place is not idle)."""
+    return (
+        len(v) == outcomes.stuck_window_steps
+        and float(np.mean(np.abs(v))) < outcomes.stuck_speed_mps
+        and float(np.mean(np.abs(omega))) < outcomes.stuck_yaw_rate_radps
+    )
+
+
+def is_stuck_window(rows: Sequence[dict[str, object]], outcomes: Outcomes) -> bool:
+    """The stuck rule over the last `stuck_window_steps` logged control steps: the robot is idle
+    (measured body velocities, `is_idle`) and the controller is not trying to move it either (the
+    commanded v and omega are idle by the same thresholds: a command the skid-steer cannot yet
+    follow, such as a slow turn in place, is progress). A window that starts right after a solver
+    fallback, or in which the controller resumed after one, is not judged: the drive is ramping up
+    from the brake. A window of nothing but fallbacks (a solver that keeps failing and braking) is
+    judged like any other: that robot is stuck."""
+    n = outcomes.stuck_window_steps
+    window = rows[-n:]
+    if len(window) < n:
+        return False
+    recent = rows[-(n + 1) :]  # the step before the window too: "right after a fallback"
+    resumed = any(
+        a["fallback"] != "none" and b["fallback"] == "none" for a, b in zip(recent, recent[1:], strict=False)
+    )
+    if resumed:
+        return False
+    return is_idle(
+        [r["v_body_mps"] for r in window], [r["omega_body_radps"] for r in window], outcomes
+    ) and is_idle([r["v_cmd_mps"] for r in window], [r["omega_cmd_radps"] for r in window], outcomes)
+
+
+def final_outcome(
+    decided: str | None, *, collided: bool, is_setpoint: bool, interrupted: bool = False
+) -> str:
+    """The episode's outcome word: `interrupted` whatever happened before the signal, else what
+    the step-by-step rules decided, else `collided` if the clearance ever reached 0, else
+    `timeout` (a set-point not reached) or `tracking` (a tracking run that ran its time)."""
+    if interrupted:
+        return "interrupted"
+    if decided is not None:
+        return decided
+    return "collided" if collided else ("timeout" if is_setpoint else "tracking")
+
+
 def reference_error(pose: np.ndarray, ref: np.ndarray) -> tuple[float, float]:
     """Position error (m) and absolute heading error (rad) of a pose against a reference state."""
     return float(np.hypot(*(pose[:2] - ref[:2]))), abs(float(wrap_angle(pose[2] - ref[2])))
@@ -47,7 +92,7 @@ def reference_error(pose: np.ndarray, ref: np.ndarray) -> tuple[float, float]:
 class OutcomeMonitor:
     """Names the outcome after each control step: `collided` when the physics clearance reaches 0
     (whatever happens after it), `reached` when a set-point is held within its tolerance for
-    `goal_hold_s`, `stuck` when the robot idles away from the reference (metrics.is_stuck_window);
+    `goal_hold_s`, `stuck` when the robot idles away from the reference (is_stuck_window);
     `update` says whether the episode ends there (Outcomes.stop_on_collision, stop_early)."""
 
     def __init__(self, reference: Reference, outcomes: Outcomes, tau_s: float) -> None:

@@ -24,8 +24,7 @@ import pytest
 from controllers import NMPCConfig, NMPCController, Obstacle, SetPoint
 from husky_sim.runs.parallel import process_map
 from husky_sim.scenario_file import scenario_yaml
-from husky_sim.sim.metrics import is_stuck_window
-from husky_sim.sim.outcomes import Outcomes
+from husky_sim.sim.outcomes import Outcomes, is_stuck_window
 
 pytestmark = pytest.mark.physics  # PyBullet or closed loops throughout (`make test-fast` skips)
 
