@@ -7,8 +7,10 @@ signal then ends the process at once: one line on stderr and exit 128 + signal n
 `begin_run()` on, both signals record themselves and raise `RunInterrupted`, a BaseException like
 KeyboardInterrupt, so no `except Exception` turns it into something else and the run can write
 what it has. Libraries that catch BaseException (trimesh does at import) or catch the
-interrupt inside a C extension can swallow the raise, so the signal is also remembered:
-`check()` at every control step raises it again, and `pending()` tells the command line to exit
+interrupt inside a C extension can swallow the raise, or turn it into an error of their own (NumPy
+converting a CasADi matrix raises SystemError), so the signal is also remembered: `check()` at
+every control step raises it again, the episode and the command line take any error raised while
+a signal is pending for the interrupt, and `pending()` tells the command line to exit
 128 + signal number (130 for SIGINT, 143 for SIGTERM) whatever happened in between.
 `deferred()` holds delivery while a file is being written so a row or a summary is never half
 written.

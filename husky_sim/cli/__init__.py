@@ -63,17 +63,28 @@ def _run_command(argv: Sequence[str] | None) -> int:
         return _interrupted(exc.signum)
     except KeyboardInterrupt:  # raised where our handler was not in place
         return _interrupted(interrupts.pending() or 2)
-    except (UsageError, ValueError) as exc:  # ConfigError and ScenarioError are ValueErrors
-        print(f"husky-sim: error: {_one_line(exc)}", file=sys.stderr)
-        return 2
-    except BrokenPipeError:  # `husky-sim scenarios | head`: the reader left, nothing to report
-        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
-        return 1
-    except OSError as exc:  # the machine, not the user: a full disk, a vanished directory
-        print(f"husky-sim: error: {_one_line(exc)}", file=sys.stderr)
-        return 1
+    except Exception as exc:
+        signum = interrupts.pending()
+        if signum is not None:  # a signal raised inside a C extension came back as its error
+            return _interrupted(signum)
+        return _error(exc)
     signum = interrupts.pending()  # a signal a library swallowed still ends the command as one
     return _interrupted(signum) if signum is not None else code
+
+
+def _error(exc: Exception) -> int:
+    """One line on stderr and the exit code for an error that ended a command; re-raised if it is
+    neither the user's nor the machine's (a bug: its traceback is wanted)."""
+    if isinstance(exc, UsageError | ValueError):  # ConfigError and ScenarioError are ValueErrors
+        print(f"husky-sim: error: {_one_line(exc)}", file=sys.stderr)
+        return 2
+    if isinstance(exc, BrokenPipeError):  # `husky-sim scenarios | head`: the reader left
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 1
+    if isinstance(exc, OSError):  # the machine, not the user: a full disk, a vanished directory
+        print(f"husky-sim: error: {_one_line(exc)}", file=sys.stderr)
+        return 1
+    raise exc
 
 
 def _one_line(exc: BaseException) -> str:

@@ -273,6 +273,14 @@ def _run(
     except (RunInterrupted, KeyboardInterrupt) as exc:  # the steps so far are kept and judged as such
         interrupted_by = interrupts.signum_of(exc)
         monitor.outcome = "interrupted"
+    except Exception:
+        # A signal whose handler raised inside a C extension comes back as that extension's error
+        # (NumPy converting a CasADi matrix: "SystemError: ... returned a result with an exception
+        # set"); with a signal received, that error is the interrupt, not a crash.
+        interrupted_by = interrupts.pending()
+        if interrupted_by is None:
+            raise
+        monitor.outcome = "interrupted"
     metrics = summarise(
         rows,
         np.array(applied_history),

@@ -22,8 +22,10 @@ import numpy as np
 import pytest
 
 from controllers import NMPCConfig, NMPCController, Obstacle, SetPoint
+from husky_sim import interrupts
 from husky_sim.runs.parallel import process_map
 from husky_sim.scenario_file import scenario_yaml
+from husky_sim.sim.episode import EpisodeConfig, run_episode
 from husky_sim.sim.outcomes import Outcomes, is_stuck_window
 
 pytestmark = pytest.mark.physics  # PyBullet or closed loops throughout (`make test-fast` skips)
@@ -133,6 +135,50 @@ def test_a_signal_during_a_solve_reaches_the_program_not_a_fallback() -> None:
         signal.signal(signal.SIGINT, previous)
     assert received == [signal.SIGINT]
     assert all(r.status != "NonIpopt_Exception_Thrown" for r in results)
+
+
+class _SignalInsideAnExtension:
+    """A real NMPC; at its third step a SIGINT arrives while a C extension holds the raise, and
+    the step ends with that extension's own error (as NumPy's SystemError on a CasADi matrix).
+    Without `signal_first` the same error comes with no signal: a plain crash."""
+
+    def __init__(self, signal_first: bool) -> None:
+        self.inner, self.signal_first, self.calls = NMPCController(NMPCConfig(safety="cbf")), signal_first, 0
+
+    def reset(self) -> None:
+        self.inner.reset()
+
+    def solve(self, state, reference, obstacles, t):
+        self.calls += 1
+        if self.calls == 3:
+            if self.signal_first:
+                with interrupts.deferred():  # received and remembered, not raised here
+                    signal.raise_signal(signal.SIGINT)
+            raise SystemError("<function DM.__array__> returned a result with an exception set")
+        return self.inner.solve(state, reference, obstacles, t)
+
+
+def _episode_with(signal_first: bool, log: Path):
+    previous = interrupts.install()
+    interrupts.begin_run()
+    try:
+        config = EpisodeConfig(start=(0.0, 0.0, 0.0), duration_s=2.0)
+        return run_episode(_SignalInsideAnExtension(signal_first), SetPoint(3.0, 0.0, 0.0), config, log)
+    finally:
+        interrupts.restore(previous)
+        interrupts.reset()
+
+
+def test_an_error_raised_with_a_signal_pending_is_the_interrupt(tmp_path: Path) -> None:
+    result = _episode_with(True, tmp_path / "log.csv")
+    assert result.metrics.outcome == "interrupted" and result.interrupted_by == signal.SIGINT
+    assert len(result.rows) == 2 == len(list(csv.DictReader((tmp_path / "log.csv").open())))
+
+
+def test_the_same_error_without_a_signal_is_a_crash(tmp_path: Path) -> None:
+    with pytest.raises(SystemError, match="exception set"):
+        _episode_with(False, tmp_path / "log.csv")
+    assert len(list(csv.DictReader((tmp_path / "log.csv").open()))) == 2  # what ran is kept
 
 
 # -- the stuck rule -------------------------------------------------------------------------------
