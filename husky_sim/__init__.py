@@ -12,16 +12,19 @@ from __future__ import annotations
 import signal
 import threading
 
+#: The gymnasium id of the simulated Husky (husky_sim.sim.environment.HuskyNavEnv).
+ENV_ID = "HuskyNav-v0"
+
 
 def _register_environments() -> None:
     held = (signal.SIGINT, signal.SIGTERM)
-    main = threading.current_thread() is threading.main_thread()
-    previous = signal.pthread_sigmask(signal.SIG_BLOCK, held) if main else None
+    can_hold = hasattr(signal, "pthread_sigmask") and threading.current_thread() is threading.main_thread()
+    previous = signal.pthread_sigmask(signal.SIG_BLOCK, held) if can_hold else None
     try:
         import gymnasium
 
-        if "HuskyNav-v0" not in gymnasium.registry:
-            gymnasium.register("HuskyNav-v0", entry_point="husky_sim.runs.environment:make_husky_nav")
+        if ENV_ID not in gymnasium.registry:
+            gymnasium.register(ENV_ID, entry_point="husky_sim.runs.environment:make_husky_nav")
     finally:
         if previous is not None:
             signal.pthread_sigmask(signal.SIG_SETMASK, previous)

@@ -6,9 +6,6 @@ from __future__ import annotations
 from husky_sim.runs.scenario import Scenario, load_scenario
 from husky_sim.sim.environment import HuskyNavEnv
 
-#: The id `import husky_sim` registers with gymnasium.
-ENV_ID = "HuskyNav-v0"
-
 
 def make_husky_nav(
     scenario: str | Scenario = "husky_point_stabilisation", seed: int | None = None
