@@ -27,12 +27,8 @@ from controllers.backends import make_solver
 from controllers.backends.opti import OptiSolver
 from controllers.config import SOLVER_BACKENDS, SolverOptions
 from controllers.ocp import Plan, layout_for, paper_nlp
-from husky_sim.runs.paper_problems import (
-    CLUTTERED_POINT_STABILISATION,
-    PAPER_POINT_STABILISATION,
-    KinematicProblem,
-)
-from husky_sim.sim.kinematic import run_kinematic
+from husky_sim.runs.paper_problems import CLUTTERED_POINT_STABILISATION, PAPER_POINT_STABILISATION
+from husky_sim.sim.kinematic import KinematicProblem, run_kinematic
 
 REFERENCE = "ipopt"
 DEFAULT_SOLVER = SolverOptions().backend
@@ -179,7 +175,7 @@ def bench_cell(
 
 
 def run_bench(
-    variants: Sequence[str] = SAFETY_CONSTRAINTS,
+    controllers: Sequence[str] = SAFETY_CONSTRAINTS,
     horizons: Sequence[int] = (5, 7, 12),
     obstacle_counts: Sequence[int] = (1, 7),
     solvers: Sequence[str] = SOLVER_BACKENDS,
@@ -187,8 +183,10 @@ def run_bench(
     gamma: float = 0.1,
     progress: bool = False,
 ) -> list[BenchRecord]:
+    """Every cell of controllers x horizons x obstacle counts, each on its own recorded problems.
+    A record names its controller `variant` (the JSON key the bench's consumers read)."""
     records = []
-    for variant in variants:
+    for variant in controllers:
         for horizon in horizons:
             for count in obstacle_counts:
                 cell = bench_cell(variant, horizon, count, solvers, steps, gamma)
@@ -202,7 +200,7 @@ def run_bench(
 def format_table(records: Sequence[BenchRecord]) -> str:
     """Markdown table: per cell and backend, CPU and wall times and the speed-up over IPOPT."""
     lines = [
-        "| variant | N | obstacles | solver | CPU median / p99 (ms) | wall median / p95 / p99 / max (ms) "
+        "| controller | N | obstacles | solver | CPU median / p99 (ms) | wall median / p95 / p99 / max (ms) "
         "| CPU speed-up vs ipopt | fallbacks | first-control diff p99 |",
         "|---|---|---|---|---|---|---|---|---|",
     ]

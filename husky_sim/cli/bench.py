@@ -18,7 +18,7 @@ def cmd_bench(args: argparse.Namespace) -> int:
     from husky_sim.bench.solvers import format_table, records_json, run_bench
 
     records = run_bench(
-        variants=args.variants,
+        controllers=args.controllers,
         horizons=args.horizons,
         obstacle_counts=args.obstacles,
         solvers=args.solvers,
@@ -65,7 +65,9 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     bench.add_argument("--json", action="store_true", help="print JSON records instead of a table")
     bench.add_argument("--steps", type=count_arg, default=150, help="control steps per cell (default 150)")
     paper = CONTROLLER_CHOICES[:4]  # the bench times the paper's OCP (husky-cbf: `run` reports its times)
-    bench.add_argument("--variants", nargs="+", choices=paper, default=list(paper))
+    bench.add_argument(
+        "--controllers", nargs="+", choices=paper, default=list(paper), help="the paper's (default: all four)"
+    )
     bench.add_argument("--horizons", nargs="+", type=horizon_arg, default=[5, 7, 12])
     bench.add_argument(
         "--obstacles", nargs="+", type=int, choices=range(1, 8), default=[1, 7], metavar="{1..7}"

@@ -27,7 +27,6 @@ from typing import Literal
 
 import numpy as np
 
-from controllers import Obstacle
 from husky_sim.runs.scenario import Scenario
 from husky_sim.sim import specs as specs
 from husky_sim.sim.drive import DriveConfig
@@ -326,34 +325,24 @@ def check_stopping_distance(scenario: Scenario) -> Finding:
     return Finding("stopping distance", "pass", text, values)
 
 
-def kinematic_obstacles(scenario: Scenario) -> list[Obstacle]:
-    """The scenario's obstacles at t = 0 as constant-velocity circles."""
-    out = []
-    for spec in scenario.obstacle_specs():
-        centre, vel = spec.state_at(0.0)
-        out.append(Obstacle(float(centre[0]), float(centre[1]), spec.radius_m, float(vel[0]), float(vel[1])))
-    return out
-
-
 def measure_solve_times(
     scenario: Scenario, controller: str, horizon: int | None = None, solves: int = 100
 ) -> np.ndarray:
     """Wall times (s) of `solves` NMPC solves on the scenario's kinematic closed loop on this
     machine; the loop restarts from the start pose when a set-point is reached early."""
     nmpc = scenario.make_controller(controller, horizon)
-    obstacles = kinematic_obstacles(scenario)
-    start = (scenario.robot.start.x_m, scenario.robot.start.y_m, scenario.robot.start.yaw_rad)
+    problem = scenario.kinematic_problem(allow_waypoints=True)
     times: list[float] = []
     while len(times) < solves:
         remaining = solves - len(times)
         episode = run_kinematic(
             nmpc,
-            start,
-            scenario.reference_object(),
-            obstacles,
+            problem.start,
+            problem.reference,
+            problem.obstacles,
             scenario.tau_s,
             remaining * scenario.tau_s,
-            scenario.robot.radius(),
+            problem.robot_radius_m,
         )
         times.extend(episode.solve_time_s.tolist())
     return np.array(times[:solves])

@@ -25,7 +25,7 @@ import numpy as np
 from foxglove import messages as fm
 
 from controllers import ControlResult, Reference, SetPoint
-from husky_sim.sim.episode import LOG_COLUMNS
+from husky_sim.sim.step_log import LOG_COLUMNS
 
 #: The file a run folder's recording is written to.
 MCAP_NAME = "run.mcap"

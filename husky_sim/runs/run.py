@@ -14,9 +14,6 @@ from husky_sim.runs.scenario import Scenario, load_scenario
 from husky_sim.sim.episode import run_episode
 from husky_sim.sim.geometry import load_geometry
 
-#: Kinematic clearance above -this (m) is contact, not collision: IPOPT meets B = 0 to ~1e-9.
-KINEMATIC_CONTACT_TOL_M = 1e-6
-
 
 def controller_header(
     sc: Scenario,
@@ -144,16 +141,10 @@ def run_scenario_kinematic(
 
     import numpy as np
 
-    from controllers import Obstacle, SetPoint
+    from controllers import SetPoint
     from husky_sim.sim.kinematic import run_kinematic
-    from husky_sim.sim.metrics import (
-        NO_TRACKING_FIELDS,
-        count_reversals,
-        judge_tracking,
-        reference_reachable,
-        tracking_rmse,
-    )
-    from husky_sim.sim.outcomes import final_outcome, is_idle
+    from husky_sim.sim.metrics import NO_TRACKING_FIELDS, count_reversals, judge_tracking, tracking_rmse
+    from husky_sim.sim.outcomes import final_outcome, reference_reachable
 
     sc = load_scenario(scenario) if isinstance(scenario, str) else scenario
     if controller not in SAFETY_CONSTRAINTS:
@@ -161,41 +152,26 @@ def run_scenario_kinematic(
     config = sc.controller_config(controller, horizon, gamma)
     if robot_radius_m is not None:
         config = replace(config, robot_radius_m=robot_radius_m)
-    specs = sc.obstacle_specs()
-    if any(o.waypoints for o in specs):
-        raise ValueError(f"{sc.name}: waypoint obstacles have no constant-velocity kinematic model")
-    obstacles = [Obstacle(o.x_m, o.y_m, o.radius_m, o.vx_mps, o.vy_mps) for o in specs]
-    reference = sc.reference_object()
+    problem = sc.kinematic_problem(config.robot_radius_m)
+    obstacles, reference = problem.obstacles, problem.reference
     s = sc.success
     outcomes = sc.episode_config().outcomes
     ep = run_kinematic(
         NMPCController(config),
-        (sc.robot.start.x_m, sc.robot.start.y_m, sc.robot.start.yaw_rad),
+        problem.start,
         reference,
         obstacles,
         sc.tau_s,
-        sc.duration_s,
-        config.robot_radius_m,
+        problem.duration_s,
+        problem.robot_radius_m,
         outcomes,
     )
     is_setpoint = isinstance(reference, SetPoint)
     refs = np.array([reference.state_at(t) for t in ep.times_s])
     errors = np.hypot(*(ep.states[:, :2] - refs[:, :2]).T)
     rmse = None if is_setpoint else tracking_rmse(errors, ep.times_s, s.tracking_settle_s)
-    window = ep.controls[-s.stuck_window_steps :]
-    idle = is_idle(window[:, 0], window[:, 1], outcomes)
-    far = errors[-1] > (s.goal_position_m if is_setpoint else s.tracking_rmse_m)
-    collided = bool(obstacles) and ep.min_clearance_m < -KINEMATIC_CONTACT_TOL_M
-    decided = (
-        "collided"
-        if collided
-        else "reached"
-        if is_setpoint and ep.reached
-        else "stuck"
-        if idle and far
-        else None
-    )
-    outcome = final_outcome(decided, collided=collided, is_setpoint=is_setpoint)
+    collided = ep.outcome == "collided"
+    outcome = final_outcome(ep.outcome, collided=collided, is_setpoint=is_setpoint)
     judgement = None
     if not is_setpoint:
         # the robot here is the controller's circle (config.robot_radius_m), not the URDF footprint:

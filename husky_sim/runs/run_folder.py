@@ -1,6 +1,6 @@
 """A run folder on disk, named, written and read in this one module: `summary.json` (the run's summary,
 strict JSON), `log.csv` (one row per control step, written row by row by the episode: its columns
-are husky_sim.sim.episode.LOG_COLUMNS), `trace.npz` (husky_sim.sim.trace) and a suite's
+are husky_sim.sim.step_log.LOG_COLUMNS), `trace.npz` (husky_sim.sim.trace) and a suite's
 `results.csv`. Plots, rendering, claims and the suite read runs only through here, and a file that
 cannot be used is a RunFolderError: one line that names the file."""
 

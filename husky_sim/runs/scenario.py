@@ -29,6 +29,7 @@ from controllers import (
     Controller,
     NMPCConfig,
     NMPCController,
+    Obstacle,
     Reference,
     SafetyConstraint,
     SetPoint,
@@ -40,6 +41,7 @@ from husky_sim.scenario_file import ScenarioFileError, read_scenario_data
 from husky_sim.sim.drive import DriveConfig
 from husky_sim.sim.episode import EpisodeConfig
 from husky_sim.sim.geometry import load_geometry
+from husky_sim.sim.kinematic import KinematicProblem
 from husky_sim.sim.outcomes import Outcomes
 from husky_sim.sim.robot import WheelFriction
 from husky_sim.sim.sensing import SensingConfig
@@ -87,6 +89,10 @@ def _real(lo: float, hi: float, unit: str = "", *, lo_open: bool = False) -> Any
         return number
 
     return Annotated[float, BeforeValidator(check)]
+
+
+#: The longest prediction horizon N (steps) a scenario, a command-line override or a check takes.
+MAX_HORIZON = 50
 
 
 def _whole(lo: int, hi: int, unit: str = "") -> Any:
@@ -298,7 +304,7 @@ class ControllerSpec(_Strict):
     Commanded limits may exceed the Husky's (the audit of `husky-sim check` flags that), within
     what a command can physically mean."""
 
-    horizon: _whole(1, 50, "steps") = NMPCConfig.horizon
+    horizon: _whole(1, MAX_HORIZON, "steps") = NMPCConfig.horizon
     gamma: _real(0.0, 1.0) = NMPCConfig.gamma
     alpha: _real(0.0, 1.0) = NMPCConfig.alpha
     state_weight: tuple[Weight, Weight, Weight] = _diagonal(NMPCConfig.state_weight)
@@ -451,6 +457,31 @@ class Scenario(_Strict):
         if seed is not None:
             data["seed"] = seed
         return scenario_from_data(data, "override")
+
+    def kinematic_problem(
+        self, robot_radius_m: float | None = None, allow_waypoints: bool = False
+    ) -> KinematicProblem:
+        """This scenario for the kinematic loop (husky_sim.sim.kinematic), with the controller's
+        circle unless robot_radius_m (m) is given. An obstacle on waypoints has no constant-velocity
+        model (ValueError), unless `allow_waypoints`: then it moves on at its velocity at t = 0 (the
+        solve-time audit needs problems of the scenario's size, not its exact motion)."""
+        specs = self.obstacle_specs()
+        if not allow_waypoints and any(o.waypoints for o in specs):
+            raise ValueError(f"{self.name}: waypoint obstacles have no constant-velocity kinematic model")
+        obstacles = []
+        for spec in specs:
+            centre, velocity = spec.state_at(0.0)
+            x, y, vx, vy = float(centre[0]), float(centre[1]), float(velocity[0]), float(velocity[1])
+            obstacles.append(Obstacle(x, y, spec.radius_m, vx, vy))
+        start = self.robot.start
+        return KinematicProblem(
+            name=self.name,
+            start=(start.x_m, start.y_m, start.yaw_rad),
+            reference=self.reference_object(),
+            obstacles=tuple(obstacles),
+            robot_radius_m=self.robot.radius() if robot_radius_m is None else robot_radius_m,
+            duration_s=self.duration_s,
+        )
 
     def reference_object(self) -> Reference:
         if self.reference.goal is not None:

@@ -1,8 +1,8 @@
 """The simulated Husky as an environment: one PyBullet world with the robot, its skid-steer drive,
 the sensor and the clearance monitor, advanced one control period at a time.
 
-`HuskyEnvironment` is the physics side of a control step. The closed-loop rollout
-(husky_sim.sim.episode.run_episode) steps it with the NMPC's commands, and the gymnasium
+`HuskyEnvironment` is the physics side of a control step. The closed loop (husky_sim.sim.rollout,
+through husky_sim.sim.episode.run_episode) steps it with the NMPC's commands, and the gymnasium
 environment `HuskyNavEnv` (registered as "HuskyNav-v0" by `import husky_sim`) steps the same class
 with an agent's actions, so both simulate the same thing: the command is held for tau through the
 drive's velocity and acceleration limits, and the clearance is the physics engine's, every physics
@@ -26,6 +26,7 @@ from husky_sim.sim.collision import ClearanceMonitor
 from husky_sim.sim.drive import SkidSteerDrive
 from husky_sim.sim.outcomes import OutcomeMonitor, reference_error
 from husky_sim.sim.robot import HuskyRobot
+from husky_sim.sim.rollout import control_steps
 from husky_sim.sim.sensing import Measurement, Sensor
 from husky_sim.sim.world import World
 
@@ -39,7 +40,8 @@ CLEARANCE_PREFILTER_MARGIN_M = 0.02
 
 class HuskyEnvironment:
     """One episode's simulated Husky (EpisodeConfig: world, start, drive, wheel friction, payload,
-    sensing and its seed). Call `close` (or use it as a context manager) to free the world."""
+    sensing and its seed), a husky_sim.sim.rollout.Plant. Call `close` (or use it as a context
+    manager) to free the world."""
 
     def __init__(self, config: EpisodeConfig) -> None:
         self.config = config
@@ -62,6 +64,24 @@ class HuskyEnvironment:
             self.world.close()
             raise
         self.substeps = round(config.world.physics_hz * config.tau_s)  # physics steps per control step
+        self.footprint_radius_m = self.robot.geometry.footprint_radius_m
+        self.obstacle_radii_m = np.array([o.radius_m for o in config.world.obstacles])
+
+    def pose(self) -> np.ndarray:
+        """The true base pose [x m, y m, yaw rad]."""
+        return self.robot.pose()
+
+    def body_velocity(self) -> np.ndarray:
+        """The true body velocity [v m/s, omega rad/s]."""
+        return self.robot.body_velocity()
+
+    def wheel_speeds(self) -> np.ndarray:
+        """The four wheels' speeds (rad/s) [l1, l2, r1, r2]."""
+        return self.robot.wheel_speeds()
+
+    def obstacle_centres(self, t_s: float) -> np.ndarray:
+        """True obstacle centres (m), shape (n, 2), at time t_s (s)."""
+        return self.world.obstacle_centres(t_s)
 
     def measure(self) -> Measurement:
         """What the controller is told now: the sensor's (noisy, delayed) pose and obstacles."""
@@ -144,7 +164,7 @@ class HuskyNavEnv(gymnasium.Env):
                 "obstacle_mask": spaces.MultiBinary(OBSERVED_OBSTACLES),
             }
         )
-        self._steps = int(math.ceil(config.duration_s / config.tau_s - 1e-9))
+        self._steps = control_steps(config.duration_s, config.tau_s)
         self._sim: HuskyEnvironment | None = None
         self._monitor: OutcomeMonitor | None = None
         self._k = 0

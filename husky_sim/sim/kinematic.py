@@ -1,21 +1,46 @@
 """Kinematic closed loop: the controller drives its own unicycle model (RK4 over tau), no physics.
 
 This is the paper's MATLAB-style simulation, kept as a reference point next to the PyBullet runs:
-it isolates the controller's behaviour from wheel slip, actuator limits and body geometry.
-Obstacles move at constant velocity; clearance is measured on the circle model every step.
+it isolates the controller's behaviour from wheel slip, actuator limits and body geometry. It is
+a second plant behind the same loop (husky_sim.sim.rollout) and outcome monitor as the PyBullet
+Husky; what differs is said here. Obstacles move at constant velocity and are sensed exactly; the
+robot is the controller's circle, and clearance is measured on the circle model at the end of each
+step. The paper's rules for this loop: it runs its full time unless the set-point is held (a
+collision does not end it; the stuck rule is judged once, at the end, on the last commands), and a
+clearance above -KINEMATIC_CONTACT_TOL_M is contact, not collision.
 """
 
 from __future__ import annotations
 
-from collections.abc import Sequence
-from dataclasses import dataclass, field
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from controllers import Controller, Obstacle, Reference, SetPoint
+from controllers import Controller, Obstacle, Reference
 from controllers.model import step, wrap_angle
+from husky_sim.interrupts import RunInterrupted
 from husky_sim.sim.metrics import count_reversals
-from husky_sim.sim.outcomes import Outcomes
+from husky_sim.sim.outcomes import OutcomeMonitor, Outcomes
+from husky_sim.sim.rollout import control_steps, rollout
+from husky_sim.sim.sensing import Measurement
+
+#: Kinematic clearance above -this (m) is contact, not collision: IPOPT meets B = 0 to ~1e-9, and
+#: the model the controller plans with is the plant, so its plans are followed exactly.
+KINEMATIC_CONTACT_TOL_M = 1e-6
+
+
+@dataclass(frozen=True)
+class KinematicProblem:
+    """What a kinematic run needs besides the controller: start (m, m, rad), reference, obstacles
+    at t = 0 (constant velocity), the robot's circle (m) and the duration (s)."""
+
+    name: str
+    start: tuple[float, float, float]
+    reference: Reference
+    obstacles: tuple[Obstacle, ...]
+    robot_radius_m: float
+    duration_s: float
 
 
 @dataclass
@@ -33,6 +58,7 @@ class KinematicEpisode:
     reached: bool
     time_to_goal_s: float | None
     statuses: list[str] = field(default_factory=list)
+    outcome: str | None = None  # what the outcome monitor decided (None: nothing; final_outcome)
 
     @property
     def min_clearance_m(self) -> float:
@@ -82,6 +108,53 @@ def clearance(position_xy: np.ndarray, obstacles: Sequence[Obstacle], robot_radi
     )
 
 
+class KinematicEnvironment:
+    """The controller's unicycle as a husky_sim.sim.rollout.Plant: the command is followed exactly
+    (RK4 over tau_s, controllers.model.step), the body velocity is the last command, and there are
+    no wheels (their speeds are NaN)."""
+
+    def __init__(
+        self, start: Sequence[float], obstacles: Sequence[Obstacle], tau_s: float, robot_radius_m: float
+    ) -> None:
+        self.tau_s = tau_s
+        self._obstacles = list(obstacles)
+        self._state = np.asarray(start, dtype=float)
+        self._command = np.zeros(2)
+        self._k = 0  # control steps taken: the time is k * tau_s
+        self.footprint_radius_m = robot_radius_m
+        self.obstacle_radii_m = np.array([o.radius_m for o in self._obstacles])
+        self.initial_clearance_m = clearance(self._state, obstacles_at(self._obstacles, 0.0), robot_radius_m)
+
+    def pose(self) -> np.ndarray:
+        return self._state
+
+    def body_velocity(self) -> np.ndarray:
+        return self._command
+
+    def wheel_speeds(self) -> np.ndarray:
+        return np.full(4, np.nan)
+
+    def measure(self) -> Measurement:
+        """The exact state and the obstacles at the current time."""
+        return Measurement(self._state, obstacles_at(self._obstacles, self._k * self.tau_s))
+
+    def obstacle_centres(self, t_s: float) -> np.ndarray:
+        return np.array([o.position_after(t_s) for o in self._obstacles], dtype=float).reshape(-1, 2)
+
+    def advance(
+        self, command: np.ndarray, on_physics_step: Callable[[np.ndarray], None] | None = None
+    ) -> tuple[np.ndarray, float]:
+        """One RK4 step of tau_s; the clearance is the circle model's at the step's end."""
+        t = self._k * self.tau_s
+        self._state = step(self._state, command, self.tau_s)
+        self._command = command
+        self._k += 1
+        if on_physics_step is not None:
+            on_physics_step(command)
+        t_next = t + self.tau_s
+        return command, clearance(self._state, obstacles_at(self._obstacles, t_next), self.footprint_radius_m)
+
+
 def run_kinematic(
     controller: Controller,
     start: Sequence[float],
@@ -93,49 +166,34 @@ def run_kinematic(
     outcomes: Outcomes | None = None,
 ) -> KinematicEpisode:
     """Run the closed loop for duration_s (s); a set-point run stops once the goal is held within
-    the goal tolerances of `outcomes` (position m, heading rad, for goal_hold_s)."""
-    outcomes = outcomes or Outcomes()
-    controller.reset()
-    steps = int(round(duration_s / tau_s))
-    hold_steps = max(int(round(outcomes.goal_hold_s / tau_s)), 1)
-    state = np.asarray(start, dtype=float)
-    states, controls, clear, sh, active, solve_t, statuses = [state], [], [], [], [], [], []
-    clear.append(clearance(state, obstacles_at(obstacles, 0.0), robot_radius_m))
-    fallbacks, in_tol, reached_at = 0, 0, None
-    for k in range(steps):
-        t = k * tau_s
-        result = controller.solve(state, reference, obstacles_at(obstacles, t), t)
-        state = step(state, result.control, tau_s)
-        states.append(state)
-        controls.append(result.control)
-        sh.append(float(np.min(result.decay_slack)))
-        active.append(result.safety_active)
-        solve_t.append(result.solve_time_s)
-        statuses.append(result.status)
-        fallbacks += result.is_fallback
-        clear.append(clearance(state, obstacles_at(obstacles, t + tau_s), robot_radius_m))
-        if isinstance(reference, SetPoint):
-            goal = reference.state_at(t + tau_s)
-            ok = (
-                np.hypot(*(state[:2] - goal[:2])) <= outcomes.goal_position_m
-                and abs(wrap_angle(state[2] - goal[2])) <= outcomes.goal_heading_rad
-            )
-            in_tol = in_tol + 1 if ok else 0
-            if in_tol == 1:
-                reached_at = t + tau_s
-            if in_tol >= hold_steps:
-                break
-    reached = in_tol >= hold_steps
+    the goal tolerances of `outcomes` (position m, heading rad, for goal_hold_s). A signal raises
+    RunInterrupted (a kinematic run has no folder to keep its steps in)."""
+    outcomes = replace(outcomes or Outcomes(), stop_on_collision=False, stop_early=True)
+    plant = KinematicEnvironment(start, obstacles, tau_s, robot_radius_m)
+    monitor = OutcomeMonitor(
+        reference, outcomes, tau_s, contact_tolerance_m=KINEMATIC_CONTACT_TOL_M, stuck_at_end=True
+    )
+    record = rollout(plant, controller, reference, monitor, control_steps(duration_s, tau_s), tau_s)
+    if record.interrupted_by is not None:
+        raise RunInterrupted(record.interrupted_by)
+    rows = record.rows
+
+    def column(name: str) -> np.ndarray:
+        return np.array([r[name] for r in rows])
+
+    poses = np.column_stack([column("x_m"), column("y_m"), column("yaw_rad")]).reshape(-1, 3)
+    states = np.vstack([poses, record.final_pose])
     return KinematicEpisode(
         times_s=tau_s * np.arange(len(states)),
-        states=np.array(states),
-        controls=np.array(controls).reshape(-1, 2),
-        clearance_m=np.array(clear),
-        min_decay_slack=np.array(sh),
-        safety_active=np.array(active),
-        solve_time_s=np.array(solve_t),
-        fallbacks=fallbacks,
-        reached=reached,
-        time_to_goal_s=reached_at if reached else None,
-        statuses=statuses,
+        states=states,
+        controls=np.column_stack([column("v_cmd_mps"), column("omega_cmd_radps")]).reshape(-1, 2),
+        clearance_m=np.concatenate([[plant.initial_clearance_m], column("clearance_m")]).astype(float),
+        min_decay_slack=column("s_h_min"),
+        safety_active=column("safety_active"),
+        solve_time_s=column("solve_ms") / 1000.0,
+        fallbacks=int(np.sum(column("fallback") != "none")),
+        reached=monitor.goal_held,
+        time_to_goal_s=monitor.reached_at if monitor.goal_held else None,
+        statuses=[str(r["status"]) for r in rows],
+        outcome=monitor.outcome,
     )

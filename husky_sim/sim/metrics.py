@@ -1,17 +1,19 @@
-"""Per-episode metrics and the outcome name, computed from the per-step log rows."""
+"""Per-episode metrics and the outcome name, computed from the rollout's per-step rows."""
 
 from __future__ import annotations
 
 import signal
 from collections import defaultdict
-from collections.abc import Sequence
 from dataclasses import asdict, dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-from controllers import Reference
 from controllers.model import wrap_angle
 from husky_sim.sim.outcomes import Outcomes, final_outcome
+
+if TYPE_CHECKING:
+    from husky_sim.sim.rollout import Rollout
 
 #: What each outcome word means, for people reading results (results.md, README).
 OUTCOME_MEANINGS = {
@@ -49,16 +51,6 @@ def tracking_rmse(errors_m: np.ndarray, t_s: np.ndarray, settle_s: float) -> flo
     """RMS of the position errors (m) from settle_s (s) on; None if the run ended before it."""
     settled = np.asarray(t_s) >= settle_s
     return float(np.sqrt(np.mean(np.asarray(errors_m)[settled] ** 2))) if np.any(settled) else None
-
-
-def reference_reachable(
-    ref_xy_m: np.ndarray, obstacle_xy_m: np.ndarray, obstacle_radius_m: np.ndarray, robot_radius_m: float
-) -> np.ndarray:
-    """Whether the reference point (m; shape (..., 2)) lies outside every obstacle circle (centres
-    (..., M, 2) m, radii (M,) m) inflated by the robot's radius (m): distance > r_obs + r_robot."""
-    ref = np.asarray(ref_xy_m, dtype=float)[..., None, :]
-    distance = np.hypot(*np.moveaxis(ref - np.asarray(obstacle_xy_m, dtype=float), -1, 0))
-    return np.all(distance > np.asarray(obstacle_radius_m, dtype=float) + robot_radius_m, axis=-1)
 
 
 @dataclass(frozen=True)
@@ -188,25 +180,22 @@ class EpisodeMetrics:
 
 
 def summarise(
-    rows: Sequence[dict[str, object]],
+    record: Rollout,
     applied: np.ndarray,
     physics_dt_s: float,
-    reference: Reference,
-    is_setpoint: bool,
-    outcome: str | None,
-    reached_at: float | None,
     outcomes: Outcomes,
-    tau_s: float,
     wall_time_s: float,
     *,
     robot_radius_m: float | None,
     footprint_radius_m: float,
-    final_pose: np.ndarray,
     sim_time_s: float,
-    interrupted_by: int | None = None,
 ) -> EpisodeMetrics:
-    """Metrics of an episode whose rows were logged by husky_sim.sim.episode (possibly none, when a
-    signal ended it before the first control step)."""
+    """Metrics of a PyBullet episode from what its rollout recorded (possibly no rows, when a
+    signal ended it before the first control step), the drive's applied command after every
+    physics step of physics_dt_s (s), and the run's wall and simulated time (s)."""
+    rows, monitor, final_pose = record.rows, record.monitor, record.final_pose
+    reference, is_setpoint, tau_s = monitor.reference, monitor.is_setpoint, record.tau_s
+    interrupted_by = record.interrupted_by
     col: dict[str, np.ndarray] = (
         {key: np.array([r[key] for r in rows]) for key in rows[0]}
         if rows
@@ -221,7 +210,7 @@ def summarise(
     min_clear = float(np.min(clearance)) if np.any(np.isfinite(clearance)) else None  # None: no obstacles
     collided = min_clear is not None and min_clear <= 0.0
     outcome = final_outcome(
-        outcome, collided=collided, is_setpoint=is_setpoint, interrupted=interrupted_by is not None
+        monitor.outcome, collided=collided, is_setpoint=is_setpoint, interrupted=interrupted_by is not None
     )
     rmse, judgement = None, None
     if not is_setpoint:
@@ -245,7 +234,7 @@ def summarise(
         final_heading_error_rad=final_head,
         tracking_rmse_m=rmse,
         **(NO_TRACKING_FIELDS if judgement is None else judgement.fields()),
-        time_to_goal_s=reached_at if outcome == "reached" else None,
+        time_to_goal_s=monitor.reached_at if outcome == "reached" else None,
         path_length_m=float(np.sum(np.hypot(*np.diff(poses[:, :2], axis=0).T))),
         reversals=reversals,
         reverse_steps=reverse_steps,

@@ -1,10 +1,12 @@
 """An episode's outcome, decided in one place and fed step by step: the thresholds (`Outcomes`)
-and the monitor that applies them after every control step (`OutcomeMonitor`). The closed-loop
-rollout (husky_sim.sim.episode) and the gymnasium environment (husky_sim.sim.environment) both
-use it, so a run and an environment episode end for the same reasons."""
+and the monitor that applies them after every control step (`OutcomeMonitor`). The closed loop
+(husky_sim.sim.rollout, for the PyBullet and the kinematic plant alike) and the gymnasium
+environment (husky_sim.sim.environment) both use it, so a run and an environment episode end for
+the same reasons."""
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -89,18 +91,49 @@ def reference_error(pose: np.ndarray, ref: np.ndarray) -> tuple[float, float]:
     return float(np.hypot(*(pose[:2] - ref[:2]))), abs(float(wrap_angle(pose[2] - ref[2])))
 
 
-class OutcomeMonitor:
-    """Names the outcome after each control step: `collided` when the physics clearance reaches 0
-    (whatever happens after it), `reached` when a set-point is held within its tolerance for
-    `goal_hold_s`, `stuck` when the robot idles away from the reference (is_stuck_window);
-    `update` says whether the episode ends there (Outcomes.stop_on_collision, stop_early)."""
+def reference_reachable(
+    ref_xy_m: np.ndarray, obstacle_xy_m: np.ndarray, obstacle_radius_m: np.ndarray, robot_radius_m: float
+) -> np.ndarray:
+    """Whether the reference point (m; shape (..., 2)) lies outside every obstacle circle (centres
+    (..., M, 2) m, radii (M,) m) inflated by the robot's radius (m): distance > r_obs + r_robot.
+    Tracking is judged only where it holds (husky_sim.sim.metrics.judge_tracking)."""
+    ref = np.asarray(ref_xy_m, dtype=float)[..., None, :]
+    distance = np.hypot(*np.moveaxis(ref - np.asarray(obstacle_xy_m, dtype=float), -1, 0))
+    return np.all(distance > np.asarray(obstacle_radius_m, dtype=float) + robot_radius_m, axis=-1)
 
-    def __init__(self, reference: Reference, outcomes: Outcomes, tau_s: float) -> None:
+
+class OutcomeMonitor:
+    """Names the outcome after each control step: `collided` when the clearance reaches
+    -contact_tolerance_m (whatever happens after it), `reached` when a set-point is held within its
+    tolerance for `goal_hold_s`, `stuck` when the robot idles away from the reference
+    (is_stuck_window); `update` says whether the episode ends there (Outcomes.stop_on_collision,
+    stop_early; a held goal ends it even after a collision, which still names it).
+
+    `contact_tolerance_m`: 0 for the physics engine's clearance; the kinematic loop's exact circle
+    model meets a constraint boundary to the solver's tolerance, which is contact, not collision.
+    `stuck_at_end`: judge the stuck rule once, on the last window of commands (`finish`), instead
+    of after every step: the paper's kinematic loop runs its full time, and its robots stop in
+    front of an obstacle for seconds before going round it."""
+
+    def __init__(
+        self,
+        reference: Reference,
+        outcomes: Outcomes,
+        tau_s: float,
+        *,
+        contact_tolerance_m: float = 0.0,
+        stuck_at_end: bool = False,
+    ) -> None:
         self.reference, self.outcomes = reference, outcomes
         self.is_setpoint = isinstance(reference, SetPoint)
         self._hold_steps = max(round(outcomes.goal_hold_s / tau_s), 1)
+        self._contact_tolerance_m = contact_tolerance_m
+        self._stuck_at_end = stuck_at_end
         self._in_tolerance = 0
+        self._entered_at: float | None = None
+        self._position_error_m = math.nan  # at the last step judged
         self.outcome: str | None = None
+        self.goal_held = False  # the set-point was held for goal_hold_s (even after a collision)
         self.reached_at: float | None = None  # s: entry into the tolerance band that was then held
 
     def update(
@@ -110,23 +143,26 @@ class OutcomeMonitor:
         the smallest clearance (m) over its physics steps; `rows` are the control steps so far
         (the stuck rule reads their velocities, commands and fallbacks). True: stop here."""
         outcomes = self.outcomes
-        if clearance <= 0.0:
+        if clearance <= -self._contact_tolerance_m:
             self.outcome = "collided"  # a collision names the episode whatever happens after it
             if outcomes.stop_on_collision:
                 return True
         pos_err, head_err = reference_error(pose, self.reference.state_at(t_next))
-        if self.is_setpoint:
+        self._position_error_m = pos_err
+        if self.is_setpoint and not self.goal_held:
             ok = pos_err <= outcomes.goal_position_m and head_err <= outcomes.goal_heading_rad
             self._in_tolerance = self._in_tolerance + 1 if ok else 0
-            if self._in_tolerance == 1 and self.outcome is None:
-                self.reached_at = t_next
-            if self._in_tolerance >= self._hold_steps and self.outcome is None:
-                self.outcome = "reached"
+            if self._in_tolerance == 1:
+                self._entered_at = t_next
+            if self._in_tolerance >= self._hold_steps:
+                self.goal_held, self.reached_at = True, self._entered_at
+                if self.outcome is None:
+                    self.outcome = "reached"
                 if outcomes.stop_early:
                     return True
-        away = pos_err > (outcomes.goal_position_m if self.is_setpoint else outcomes.tracking_rmse_m)
         if (
-            away
+            not self._stuck_at_end
+            and self._away(pos_err)
             and t_next >= outcomes.stuck_grace_s
             and is_stuck_window(rows, outcomes)
             and self.outcome is None
@@ -135,3 +171,17 @@ class OutcomeMonitor:
             if outcomes.stop_early:
                 return True
         return False
+
+    def finish(self, rows: Sequence[dict[str, object]]) -> None:
+        """After the last step: with `stuck_at_end`, an undecided episode whose last
+        `stuck_window_steps` commands were idle (is_idle), away from the reference, is `stuck`."""
+        if not self._stuck_at_end or self.outcome is not None:
+            return
+        window = rows[-self.outcomes.stuck_window_steps :]
+        v, omega = [r["v_cmd_mps"] for r in window], [r["omega_cmd_radps"] for r in window]
+        if is_idle(v, omega, self.outcomes) and self._away(self._position_error_m):
+            self.outcome = "stuck"
+
+    def _away(self, position_error_m: float) -> bool:
+        outcomes = self.outcomes
+        return position_error_m > (outcomes.goal_position_m if self.is_setpoint else outcomes.tracking_rmse_m)

@@ -28,12 +28,11 @@ from pathlib import Path
 
 import numpy as np
 
+from husky_sim.runs.paper_problems import PAPER_ROBOT_RADIUS_M
 from husky_sim.runs.run_folder import read_log
 from husky_sim.study.suite import OURS, Cell, run_suite
 
 MODELS = ("kinematic", "physics")
-#: The paper's simulated robot circle (m); used for kinematic runs of the paper's sim scenarios.
-PAPER_ROBOT_RADIUS_M = 0.25
 POINT = "paper_point_stabilisation"
 TRACKING = ("paper_dynamic_tracking", "paper_dynamic_tracking_crossing")
 HUSKY = ("husky_point_stabilisation", "husky_circle_tracking")

@@ -14,7 +14,7 @@ def test_bench_json_records(capsys: pytest.CaptureFixture[str]) -> None:
             "--json",
             "--steps",
             "4",
-            "--variants",
+            "--controllers",
             "relax-cbf",
             "bt",
             "--horizons",
@@ -58,7 +58,7 @@ def test_bench_json_records(capsys: pytest.CaptureFixture[str]) -> None:
 
 
 def test_bench_table_has_ratio(capsys: pytest.CaptureFixture[str]) -> None:
-    assert main(["bench", "--steps", "3", "--variants", "cbf", "--horizons", "5", "--obstacles", "1"]) == 0
+    assert main(["bench", "--steps", "3", "--controllers", "cbf", "--horizons", "5", "--obstacles", "1"]) == 0
     out = capsys.readouterr().out
     assert "| cbf | 5 | 1 |" in out and "x |" in out
 
@@ -69,7 +69,7 @@ def test_bench_table_has_ratio(capsys: pytest.CaptureFixture[str]) -> None:
         ["bench", "--horizons", "0"],
         ["bench", "--steps", "-2"],
         ["bench", "--gamma", "1.5"],
-        ["bench", "--variants", "mode3"],
+        ["bench", "--controllers", "mode3"],
         ["bench", "--obstacles", "9"],
         ["bench", "--solvers", "hpipm"],
         ["bench-sim", "--solver", "opti"],

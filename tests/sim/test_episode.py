@@ -10,9 +10,10 @@ import pytest
 
 from controllers import NMPCConfig, NMPCController, Obstacle, SetPoint
 from husky_sim.sim.collision import ClearanceMonitor
-from husky_sim.sim.episode import EpisodeConfig, compare_logs, run_episode
+from husky_sim.sim.episode import EpisodeConfig, run_episode
 from husky_sim.sim.robot import HuskyRobot
 from husky_sim.sim.sensing import SensingConfig
+from husky_sim.sim.step_log import compare_logs
 from husky_sim.sim.world import ObstacleSpec, World, WorldConfig
 
 pytestmark = pytest.mark.physics  # PyBullet or closed loops throughout (`make test-fast` skips)

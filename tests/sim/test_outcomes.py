@@ -47,3 +47,23 @@ def test_a_trajectory_is_never_reached() -> None:
     monitor = OutcomeMonitor(circle, Outcomes(goal_hold_s=0.1), tau_s=0.1)
     on_it = np.asarray(circle.state_at(0.1), dtype=float)
     assert not monitor.update(0.1, on_it, math.inf, []) and monitor.outcome is None
+
+
+def test_a_held_goal_ends_the_episode_after_a_collision_that_still_names_it() -> None:
+    monitor = OutcomeMonitor(GOAL, Outcomes(goal_hold_s=0.2, stop_on_collision=False), tau_s=0.1)
+    at_goal = np.array([1.0, 0.0, 0.0])
+    assert not monitor.update(0.1, at_goal, -0.5, []) and monitor.outcome == "collided"
+    assert monitor.update(0.2, at_goal, 1.0, []) and monitor.goal_held and monitor.reached_at == 0.1
+    assert monitor.outcome == "collided"
+
+
+def test_a_contact_tolerance_and_the_stuck_rule_judged_at_the_end() -> None:
+    outcomes = Outcomes(stuck_window_steps=3, stuck_grace_s=0.0)
+    monitor = OutcomeMonitor(GOAL, outcomes, tau_s=0.1, contact_tolerance_m=1e-6, stuck_at_end=True)
+    far = np.array([0.0, 0.0, 0.0])
+    assert not monitor.update(0.1, far, -1e-7, [_row()] * 3) and monitor.outcome is None  # contact
+    monitor.finish([_row(v=1.0)] + [_row()] * 2)
+    assert monitor.outcome is None  # the last window was not idle
+    monitor.finish([_row()] * 3)
+    assert monitor.outcome == "stuck"
+    assert monitor.update(0.2, far, -2e-6, []) and monitor.outcome == "collided"  # beyond it

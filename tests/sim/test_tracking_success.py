@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from husky_sim.runs.scenario import SuccessSpec
-from husky_sim.sim.metrics import judge_tracking, reference_reachable, tracking_rmse
-from husky_sim.sim.outcomes import Outcomes
+from husky_sim.sim.metrics import judge_tracking, tracking_rmse
+from husky_sim.sim.outcomes import Outcomes, reference_reachable
 
 TAU_S = 0.1
 OUTCOMES = Outcomes(tracking_settle_s=10.0, tracking_rmse_m=0.3, rejoin_s=5.0)

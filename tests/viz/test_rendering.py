@@ -21,7 +21,7 @@ from husky_sim.cli import main
 from husky_sim.runs.run import run_scenario
 from husky_sim.runs.run_folder import summary_or_empty
 from husky_sim.runs.scenario import load_scenario, resolve
-from husky_sim.sim.episode import compare_logs
+from husky_sim.sim.step_log import compare_logs
 from husky_sim.viz.rendering import (
     GOAL_DISC_RADIUS_M,
     GOAL_DISC_THICKNESS_M,
