@@ -7,6 +7,7 @@ import argparse
 from husky_sim import interrupts
 from husky_sim.cli.common import (
     CONTROLLER_CHOICES,
+    add_backend_args,
     count_arg,
     horizon_arg,
     jobs_arg,
@@ -61,8 +62,7 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     check.add_argument("--samples", type=count_arg, default=32, help="perturbed runs K >= 1 (default 32)")
     check.add_argument("--jobs", type=jobs_arg, default=None, help="worker processes (default: all cores)")
     check.add_argument("--seed", type=seed_arg, default=None, help="perturbation seed >= 0")
-    check.add_argument("--backend", choices=("local", "dask"), default="local", help="where samples run")
-    check.add_argument("--scheduler", default=None, help="Dask scheduler address (default: a LocalCluster)")
+    add_backend_args(check, "samples")
     check.add_argument("--timing-solves", type=count_arg, default=100, help="NMPC solves timed (default 100)")
     check.add_argument(
         "--min-pass-rate", type=unit_float_arg, default=0.95, help="pass rate needed in [0, 1] (default 0.95)"

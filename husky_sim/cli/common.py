@@ -12,6 +12,8 @@ import sys
 CONTROLLER_CHOICES = ("none", "bt", "cbf", "relax-cbf", "husky-cbf")
 #: The NLP solver backends (controllers.config.SOLVER_BACKENDS, likewise kept equal by a test).
 SOLVER_CHOICES = ("fatrop", "ipopt", "opti")
+#: The longest horizon N a command takes (husky_sim.runs.scenario.MAX_HORIZON, likewise).
+MAX_HORIZON = 50
 
 
 class UsageError(Exception):
@@ -56,11 +58,23 @@ LIVE_PORT = 8765
 #: Bounds of the command line's counts: what a 2-core machine (or a cluster) can reasonably run.
 MAX_JOBS = 256
 MAX_SAMPLES = 100_000
-horizon_arg = number_in(int, 1, 50)
+horizon_arg = number_in(int, 1, MAX_HORIZON)
+HORIZON_HELP = f"prediction steps N in [1, {MAX_HORIZON}]"
 seed_arg = number_in(int, 0, 2**32 - 1)
 jobs_arg = number_in(int, 1, MAX_JOBS)
 count_arg = number_in(int, 1, MAX_SAMPLES)
 unit_float_arg = number_in(float, 0.0, 1.0)
+
+
+#: Where a suite's runs or a check's samples run (husky_sim.runs.parallel.BACKENDS, kept equal by
+#: a test).
+PARALLEL_BACKENDS = ("local", "dask")
+
+
+def add_backend_args(parser: argparse.ArgumentParser, what: str) -> None:
+    """--backend and --scheduler: local worker processes or a Dask cluster (runs.parallel)."""
+    parser.add_argument("--backend", choices=PARALLEL_BACKENDS, default="local", help=f"where {what} run")
+    parser.add_argument("--scheduler", default=None, help="Dask scheduler address (default: a LocalCluster)")
 
 
 def warn(message: str) -> None:

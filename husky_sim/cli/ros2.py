@@ -8,6 +8,7 @@ import argparse
 from husky_sim import interrupts
 from husky_sim.cli.common import (
     CONTROLLER_CHOICES,
+    HORIZON_HELP,
     UsageError,
     add_live_argument,
     announce_live,
@@ -138,7 +139,7 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
         "scenario", help="a scenario YAML path or shipped name: the controller's parameters and reference"
     )
     serve.add_argument("--controller", choices=CONTROLLER_CHOICES, default="husky-cbf")
-    serve.add_argument("--horizon", type=horizon_arg, default=None, help="prediction steps N in [1, 50]")
+    serve.add_argument("--horizon", type=horizon_arg, default=None, help=HORIZON_HELP)
     serve.add_argument("--gamma", type=unit_float_arg, default=None, help="CBF decay rate in [0, 1]")
     serve.add_argument(
         "--out", type=path_arg, default=None, help="folder for serve.csv and serve_summary.json"
@@ -161,7 +162,7 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     )
     rehearse.add_argument("scenario", help="a scenario YAML path or the name of a shipped scenario")
     rehearse.add_argument("--controller", choices=CONTROLLER_CHOICES, default="husky-cbf")
-    rehearse.add_argument("--horizon", type=horizon_arg, default=None, help="prediction steps N in [1, 50]")
+    rehearse.add_argument("--horizon", type=horizon_arg, default=None, help=HORIZON_HELP)
     rehearse.add_argument("--gamma", type=unit_float_arg, default=None, help="CBF decay rate in [0, 1]")
     rehearse.add_argument("--seed", type=seed_arg, default=None, help="noise and random-field seed")
     rehearse.add_argument(

@@ -8,6 +8,8 @@ import sys
 from husky_sim import interrupts
 from husky_sim.cli.common import (
     CONTROLLER_CHOICES,
+    UsageError,
+    add_backend_args,
     horizon_arg,
     jobs_arg,
     path_arg,
@@ -24,6 +26,8 @@ def cmd_suite(args: argparse.Namespace) -> int:
     from husky_sim.runs.scenario import load_scenario, shipped_scenarios
     from husky_sim.study.suite import markdown_table, matrix, run_suite, write_figures
 
+    if args.scheduler is not None and args.backend != "dask":
+        raise UsageError("--scheduler: needs --backend dask")
     names = args.scenarios or [p.stem for p in shipped_scenarios()]
     for name in names:  # bad input fails here, in one line, before any worker starts
         sc = load_scenario(name)
@@ -34,7 +38,14 @@ def cmd_suite(args: argparse.Namespace) -> int:
     interrupts.begin_run()
     out = prepare_out_dir(Path(args.out))
     try:
-        rows = run_suite(cells, jobs=args.jobs, out_dir=out, progress=not args.quiet)
+        rows = run_suite(
+            cells,
+            jobs=args.jobs,
+            out_dir=out,
+            progress=not args.quiet,
+            backend=args.backend,
+            scheduler=args.scheduler,
+        )
     except interrupts.RunInterrupted:
         print(
             f"husky-sim: suite interrupted: no results.csv written; runs so far in {out / 'runs'}",
@@ -66,6 +77,7 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     suite.add_argument("--gammas", nargs="+", type=unit_float_arg, default=None, help="default: file's gamma")
     suite.add_argument("--seed", type=seed_arg, default=None, help="seed (default: the file's)")
     suite.add_argument("--jobs", type=jobs_arg, default=2, help="worker processes (default 2)")
+    add_backend_args(suite, "runs")
     suite.add_argument(
         "--out", type=path_arg, default=str(SUITE_DIR), help=f"output directory (default {SUITE_DIR})"
     )

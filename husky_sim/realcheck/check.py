@@ -30,8 +30,6 @@ import numpy as np
 from controllers import CONTROLLER_NAMES
 from husky_sim.realcheck.audit import AuditThresholds, Finding, audit, measure_solve_times
 from husky_sim.realcheck.sweep import (
-    BACKENDS,
-    Backend,
     Perturbation,
     PerturbationRanges,
     SampleTask,
@@ -39,7 +37,8 @@ from husky_sim.realcheck.sweep import (
     run_tasks,
     sample_perturbations,
 )
-from husky_sim.runs.scenario import Scenario
+from husky_sim.runs.parallel import BACKENDS, Backend
+from husky_sim.runs.scenario import MAX_HORIZON, Scenario
 from husky_sim.scenario_file import scenario_yaml
 
 #: Clearance percentiles reported (of the per-sample minimum clearance, m).
@@ -70,8 +69,8 @@ class CheckOptions:
         for name in ("samples", "timing_solves"):
             if getattr(self, name) < 1:
                 raise ValueError(f"{name}: must be >= 1, got {getattr(self, name)}")
-        if self.horizon is not None and not 1 <= self.horizon <= 50:
-            raise ValueError(f"horizon: must be in [1, 50], got {self.horizon}")
+        if self.horizon is not None and not 1 <= self.horizon <= MAX_HORIZON:
+            raise ValueError(f"horizon: must be in [1, {MAX_HORIZON}], got {self.horizon}")
         if self.jobs is not None and self.jobs < 1:
             raise ValueError(f"jobs: must be >= 1, got {self.jobs}")
         if self.backend not in BACKENDS:

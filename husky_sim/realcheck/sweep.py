@@ -14,16 +14,19 @@ to 1.2 by default) while the obstacles keep their true motion.
 
 Execution backends (the same picklable `run_sample` for both, so results are identical):
 
+Both through husky_sim.runs.parallel.parallel_map, as the suite's cells:
+
 - ``local`` (default): husky_sim.runs.parallel.process_map on this machine's cores
   (``spawn`` start method: CasADi/IPOPT and PyBullet are not fork-safe once threads exist).
   Needs nothing beyond the project's dependencies.
-- ``dask``: ``distributed.Client.map`` on a Dask cluster (``--scheduler ADDRESS``, or an
-  in-process ``distributed.LocalCluster``), for thousands of samples. Dask rather than Ray:
-  Dask/distributed are pure-Python wheels with a small install, a LocalCluster starts in-process
-  in CI in about 1-2 s, and the same ``Client.map`` code runs unchanged on any cluster (SSH, SLURM,
-  Kubernetes); Ray is a large binary wheel with a heavier runtime (GCS, raylet, object store).
-  Dask is an optional extra (``pip install husky-nav-sim[cluster]``) imported only here, lazily.
-  Workers of a remote cluster need this package installed.
+- ``dask``: husky_sim.runs.parallel.dask_map, ``distributed.Client.map`` on a Dask cluster
+  (``--scheduler ADDRESS``, or an in-process ``distributed.LocalCluster``), for thousands of
+  samples. Dask rather than Ray: Dask/distributed are pure-Python wheels with a small install, a
+  LocalCluster starts in-process in CI in about 1-2 s, and the same ``Client.map`` code runs
+  unchanged on any cluster (SSH, SLURM, Kubernetes); Ray is a large binary wheel with a heavier
+  runtime (GCS, raylet, object store). Dask is an optional extra (``pip install
+  husky-nav-sim[cluster]``) imported only there, lazily. Workers of a remote cluster need this
+  package installed.
 """
 
 from __future__ import annotations
@@ -31,15 +34,12 @@ from __future__ import annotations
 import os
 from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass, fields
-from typing import Any, Literal
+from typing import Any
 
 import numpy as np
 
-from husky_sim.runs.parallel import process_map
+from husky_sim.runs.parallel import Backend, parallel_map
 from husky_sim.runs.scenario import Scenario, scenario_from_data
-
-Backend = Literal["local", "dask"]
-BACKENDS: tuple[Backend, ...] = ("local", "dask")
 
 #: Per-sample result keys that are wall-clock measurements (excluded from determinism checks).
 WALL_CLOCK_KEYS = ("solve_ms_median", "solve_ms_p95", "solve_ms_max", "wall_time_s")
@@ -189,24 +189,6 @@ def default_jobs() -> int:
         return max(os.cpu_count() or 1, 1)
 
 
-def run_local(
-    tasks: Sequence[SampleTask], jobs: int, progress: Callable[[int], None] | None = None
-) -> list[dict]:
-    """Run the tasks on `jobs` local processes (in this process when jobs == 1), in task order;
-    a sample whose worker crashed becomes an `error` result (failing, and saved for a rerun)."""
-    finished = [0]
-
-    def done(_i: int, _result: object) -> None:
-        finished[0] += 1
-        if progress:
-            progress(finished[0])
-
-    results = process_map(run_sample, tasks, jobs, done)
-    return [
-        error_result(t, r) if isinstance(r, BaseException) else r for t, r in zip(tasks, results, strict=True)
-    ]
-
-
 def error_result(task: SampleTask, exc: BaseException) -> dict[str, Any]:
     """A sample that crashed: it fails the check and names the error."""
     return {
@@ -226,41 +208,6 @@ def error_result(task: SampleTask, exc: BaseException) -> dict[str, Any]:
     }
 
 
-def run_dask(
-    tasks: Sequence[SampleTask],
-    jobs: int,
-    scheduler: str | None = None,
-    progress: Callable[[int], None] | None = None,
-) -> list[dict]:
-    """Run the tasks with distributed.Client.map: on `scheduler`, or on a LocalCluster of `jobs`
-    single-threaded worker processes (IPOPT's linear solver is not thread-safe)."""
-    try:
-        from distributed import Client, LocalCluster, as_completed
-    except ImportError:
-        raise ValueError(
-            "--backend dask needs Dask distributed: pip install 'husky-nav-sim[cluster]'"
-        ) from None
-    cluster = None
-    if scheduler is None:
-        cluster = LocalCluster(
-            n_workers=max(min(jobs, len(tasks)), 1),
-            threads_per_worker=1,
-            processes=True,
-            dashboard_address=None,
-            silence_logs=40,  # logging.ERROR
-        )
-    try:
-        with Client(cluster if cluster is not None else scheduler) as client:
-            futures = client.map(run_sample, list(tasks), pure=False)
-            for done, _ in enumerate(as_completed(futures), start=1):
-                if progress:
-                    progress(done)
-            return client.gather(futures)
-    finally:
-        if cluster is not None:
-            cluster.close()
-
-
 def run_tasks(
     tasks: Sequence[SampleTask],
     backend: Backend = "local",
@@ -268,12 +215,18 @@ def run_tasks(
     scheduler: str | None = None,
     progress: Callable[[int], None] | None = None,
 ) -> list[dict]:
-    """Per-sample results in task order, whichever backend ran them."""
+    """Per-sample results in task order, whichever backend ran them (husky_sim.runs.parallel; one
+    process when jobs == 1); a sample whose worker crashed becomes an `error` result (failing, and
+    saved for a rerun)."""
     jobs = default_jobs() if jobs is None else jobs
-    if backend == "local":
-        if scheduler is not None:
-            raise ValueError("--scheduler needs --backend dask")
-        return run_local(tasks, jobs, progress)
-    if backend == "dask":
-        return run_dask(tasks, jobs, scheduler, progress)
-    raise ValueError(f"backend: must be one of {BACKENDS}, got {backend!r}")
+    finished = [0]
+
+    def done(_i: int, _result: object) -> None:
+        finished[0] += 1
+        if progress:
+            progress(finished[0])
+
+    results = parallel_map(run_sample, tasks, jobs, done, backend, scheduler)
+    return [
+        error_result(t, r) if isinstance(r, BaseException) else r for t, r in zip(tasks, results, strict=True)
+    ]

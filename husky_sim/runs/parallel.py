@@ -1,13 +1,14 @@
-"""One way to run independent episodes on local worker processes (the suite and the sweep).
+"""One way to run independent episodes in parallel, for the suite and the sweep alike:
+`parallel_map` on local worker processes (`process_map`) or on a Dask cluster (`dask_map`).
 
-Workers are started with `spawn` (CasADi/IPOPT and PyBullet hold threads and native state that
+Local workers are started with `spawn` (CasADi/IPOPT and PyBullet hold threads and native state that
 `fork` would copy half-alive) and ignore SIGINT: a Ctrl-C in a terminal reaches the whole process
 group, and the parent alone decides. The parent, on a signal (husky_sim.interrupts), cancels what
 has not started and sends the workers SIGTERM instead of waiting for their episodes: each ends
 the episode in hand as `interrupted` (its summary written) and exits, so a suite ends within a
 second too.
-Results come back in input order; an item whose worker died (a crash, out of memory) comes back
-as the exception, for the caller to report, never as a lost run.
+Results come back in input order; an item whose worker died (a crash, out of memory) or whose
+function raised comes back as the exception, for the caller to report, never as a lost run.
 """
 
 from __future__ import annotations
@@ -17,12 +18,16 @@ import os
 import signal
 from collections.abc import Callable, Sequence
 from concurrent.futures import Future, ProcessPoolExecutor, as_completed
-from typing import TypeVar
+from typing import Literal, TypeVar
 
 from husky_sim import interrupts
 
 T = TypeVar("T")
 R = TypeVar("R")
+
+#: Where items run: local worker processes, or a Dask cluster (distributed).
+Backend = Literal["local", "dask"]
+BACKENDS: tuple[Backend, ...] = ("local", "dask")
 
 
 def _init_worker() -> None:
@@ -91,3 +96,65 @@ def process_map(
         raise
     pool.shutdown(wait=True)
     return results  # type: ignore[return-value]
+
+
+def dask_map(
+    fn: Callable[[T], R],
+    items: Sequence[T],
+    jobs: int,
+    scheduler: str | None = None,
+    on_done: Callable[[int, R | BaseException], None] | None = None,
+) -> list[R | BaseException]:
+    """fn over items with distributed.Client.map, with process_map's contract (item order, an
+    exception in its item's place): on the cluster at `scheduler`, or on a LocalCluster of `jobs`
+    single-threaded worker processes (IPOPT's linear solver is not thread-safe)."""
+    try:
+        from distributed import Client, LocalCluster, as_completed
+    except ImportError:
+        raise ValueError(
+            "backend: dask needs Dask distributed: pip install 'husky-nav-sim[cluster]'"
+        ) from None
+    results: list[R | BaseException | None] = [None] * len(items)
+    cluster = None
+    if scheduler is None:
+        cluster = LocalCluster(
+            n_workers=max(min(jobs, len(items)), 1),
+            threads_per_worker=1,
+            processes=True,
+            dashboard_address=None,
+            silence_logs=40,  # logging.ERROR
+        )
+    try:
+        with Client(cluster if cluster is not None else scheduler) as client:
+            futures = client.map(fn, list(items), pure=False)
+            index = {future.key: i for i, future in enumerate(futures)}
+            for future in as_completed(futures):
+                i = index[future.key]
+                try:
+                    results[i] = future.result()
+                except Exception as exc:  # noqa: BLE001 - reported in the item's place
+                    results[i] = exc
+                if on_done is not None:
+                    on_done(i, results[i])
+    finally:
+        if cluster is not None:
+            cluster.close()
+    return results  # type: ignore[return-value]
+
+
+def parallel_map(
+    fn: Callable[[T], R],
+    items: Sequence[T],
+    jobs: int,
+    on_done: Callable[[int, R | BaseException], None] | None = None,
+    backend: Backend = "local",
+    scheduler: str | None = None,
+) -> list[R | BaseException]:
+    """fn over items on `backend` (process_map or dask_map; `scheduler` is a Dask address)."""
+    if backend == "local":
+        if scheduler is not None:
+            raise ValueError("scheduler: needs backend dask")
+        return process_map(fn, items, jobs, on_done)
+    if backend == "dask":
+        return dask_map(fn, items, jobs, scheduler, on_done)
+    raise ValueError(f"backend: must be one of {BACKENDS}, got {backend!r}")

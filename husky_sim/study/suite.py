@@ -17,7 +17,7 @@ from pathlib import Path
 
 from tqdm import tqdm
 
-from husky_sim.runs.parallel import process_map
+from husky_sim.runs.parallel import Backend, parallel_map
 from husky_sim.runs.run_folder import RESULTS_FILE, write_results_csv
 
 #: Columns of results.md (results.csv has every summary key).
@@ -150,8 +150,11 @@ def run_suite(
     out_dir: Path | None = None,
     progress: bool = True,
     on_result: Callable[[Cell, dict[str, object]], None] | None = None,
+    backend: Backend = "local",
+    scheduler: str | None = None,
 ) -> list[dict[str, object]]:
-    """Run the cells on `jobs` worker processes; return their summaries in `cells` order."""
+    """Run the cells on `jobs` worker processes (husky_sim.runs.parallel: local, or a Dask cluster
+    at `scheduler` whose workers see out_dir); return their summaries in `cells` order."""
     if out_dir is not None:
         out_dir.mkdir(parents=True, exist_ok=True)
     bar = tqdm(total=len(cells), disable=not progress, unit="run", dynamic_ncols=True)
@@ -163,7 +166,7 @@ def run_suite(
         rows[i] = _finish(cells[i], summary, bar, on_result)
 
     try:
-        process_map(partial(run_cell, out_dir=out_dir), cells, jobs, done)
+        parallel_map(partial(run_cell, out_dir=out_dir), cells, jobs, done, backend, scheduler)
     finally:
         bar.close()
     if out_dir is not None:
