@@ -37,13 +37,14 @@ def cmd_run(args: argparse.Namespace) -> int:
     announce_live(args)
     # creates `out` (or one-line error) first
     summary = run_scenario(sc, args.controller, out_dir=out, live_port=args.live)
-    clearance = summary["min_clearance_m"]
+    metrics = summary.metrics
+    clearance = metrics.min_clearance_m
     clearance_text = "n/a" if clearance is None else f"{clearance:.3f} m"
     print(
-        f"{sc.name} {args.controller} N={horizon} gamma={gamma:g}: {summary['outcome']}, "
-        f"min clearance {clearance_text}, solve median {summary['solve_ms_median']:.2f} ms -> {out}"
+        f"{sc.name} {args.controller} N={horizon} gamma={gamma:g}: {metrics.outcome}, "
+        f"min clearance {clearance_text}, solve median {metrics.solve_ms_median:.2f} ms -> {out}"
     )
-    warn_solve_budget(summary)
+    warn_solve_budget(summary.as_dict())
     if video is not None:  # rendered afterwards from the written trace: it cannot touch the physics
         result = render_run(out, video)
         record_in_summary(out, result)

@@ -163,7 +163,7 @@ def run_sample(task: SampleTask) -> dict[str, Any]:
     from husky_sim.runs.run import run_scenario  # imported in the worker
 
     scenario = scenario_from_data(task.scenario, f"check sample {task.index}")
-    summary = run_scenario(scenario, task.controller)  # horizon, gamma and seed are in the scenario
+    summary = run_scenario(scenario, task.controller).as_dict()  # horizon, gamma, seed: in the scenario
     keys = (
         "outcome",
         "collided",

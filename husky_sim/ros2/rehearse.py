@@ -22,7 +22,7 @@ from husky_sim import interrupts
 from husky_sim.ros2.node import CONTROLLER_COUNTS, timing_stats
 from husky_sim.ros2.settings import Ros2Settings, check_domain_id, lease_domain_id
 from husky_sim.ros2.sim_robot import DdsRobot, NodeNotFound
-from husky_sim.runs.run import controller_header, run_scenario
+from husky_sim.runs.run import run_scenario, run_settings
 from husky_sim.runs.run_folder import SUMMARY_FILE, prepare_out_dir, read_summary, write_summary
 from husky_sim.runs.scenario import Scenario
 from husky_sim.scenario_file import scenario_yaml
@@ -54,8 +54,8 @@ def rehearse(
         sys.executable, "-m", "husky_sim.cli", "serve", str(scenario_file), "--controller", controller,
         "--use-sim-time", "--localhost-only", "--domain-id", str(domain), "--out", str(node_dir),
     ]  # fmt: skip
-    header = controller_header(sc, controller)
-    robot = DdsRobot(settings, sc.tau_s, int(header["horizon"]), reply_timeout_s)
+    run, _ = run_settings(sc, controller)
+    robot = DdsRobot(settings, sc.tau_s, run.horizon, reply_timeout_s)
     node_dir.mkdir(parents=True, exist_ok=True)
     node_output = node_dir / "serve.out"  # a file, not a pipe: a chatty node can never block on it
     with node_output.open("wb") as out:
@@ -69,7 +69,9 @@ def rehearse(
             node.wait(timeout=10)
             output = node_output.read_text(errors="replace").strip().splitlines()
             raise NodeNotFound(f"{exc}; node said: {output[-1] if output else '(nothing)'}") from None
-        summary = run_scenario(sc, controller, out_dir=out_dir, implementation=robot, live_port=live_port)
+        summary = run_scenario(
+            sc, controller, out_dir=out_dir, implementation=robot, live_port=live_port
+        ).as_dict()
     finally:
         node_summary = _stop_node(node, node_dir)
         if summary is not None or (out_dir / SUMMARY_FILE).exists():

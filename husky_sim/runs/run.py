@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import signal
+from dataclasses import asdict
 from pathlib import Path
 
 from controllers import SAFETY_CONSTRAINTS, Controller, NMPCController, Reference, SafetyConstraint
@@ -11,39 +12,41 @@ from husky_sim.interrupts import RunInterrupted
 from husky_sim.runs.foxglove_record import MCAP_NAME, FoxgloveRecorder
 from husky_sim.runs.run_folder import LOG_FILE, TRACE_FILE, prepare_out_dir, write_summary
 from husky_sim.runs.scenario import Scenario, load_scenario
+from husky_sim.runs.summary import KinematicMetrics, Model, RunSettings, RunSummary
 from husky_sim.sim.episode import run_episode
 from husky_sim.sim.geometry import load_geometry
 
 
-def controller_header(
+def run_settings(
     sc: Scenario,
     controller: str,
     horizon: int | None = None,
     gamma: float | None = None,
     seed: int | None = None,
-) -> dict[str, object]:
-    """The summary fields that say which controller ran with which settings (from the scenario and
-    the overrides; building the controller is not needed)."""
+    model: Model = "physics",
+) -> tuple[RunSettings, float]:
+    """Which controller runs with which settings (from the scenario and the overrides; building the
+    controller is not needed), and the controller's robot circle (m)."""
     if controller == "husky-cbf":
         full = sc.husky_cbf_config(horizon, gamma)
         nmpc_config, omega_max = full.nmpc, full.omega_cmd_max_radps
     else:
         nmpc_config = sc.controller_config(controller, horizon, gamma)
         omega_max = nmpc_config.omega_max_radps
-    return {
-        "scenario": sc.name,
-        "controller": controller,
-        "horizon": nmpc_config.horizon,
-        "gamma": nmpc_config.gamma,
-        "seed": sc.seed if seed is None else seed,
-        "model": "physics",
-        "tau_s": nmpc_config.tau_s,
-        "prediction_time_s": nmpc_config.horizon * nmpc_config.tau_s,
-        "v_min_mps": nmpc_config.v_min_mps,
-        "v_max_mps": nmpc_config.v_max_mps,
-        "omega_max_radps": omega_max,
-        "robot_radius_m": nmpc_config.robot_radius_m,
-    }
+    settings = RunSettings(
+        scenario=sc.name,
+        controller=controller,
+        horizon=nmpc_config.horizon,
+        gamma=nmpc_config.gamma,
+        seed=sc.seed if seed is None else seed,
+        model=model,
+        tau_s=nmpc_config.tau_s,
+        prediction_time_s=nmpc_config.horizon * nmpc_config.tau_s,
+        v_min_mps=nmpc_config.v_min_mps,
+        v_max_mps=nmpc_config.v_max_mps,
+        omega_max_radps=omega_max,
+    )
+    return settings, nmpc_config.robot_radius_m
 
 
 def run_scenario(
@@ -55,7 +58,7 @@ def run_scenario(
     out_dir: Path | None = None,
     implementation: Controller | None = None,
     live_port: int | None = None,
-) -> dict[str, object]:
+) -> RunSummary:
     """Run a scenario; return the summary (also written to out_dir/summary.json, with the log,
     the trace and run.mcap for Foxglove; `live_port` also streams it to Foxglove while it runs).
 
@@ -63,8 +66,7 @@ def run_scenario(
     from the named controller in another process); by default the named controller is built here.
     """
     sc = load_scenario(scenario) if isinstance(scenario, str) else scenario
-    header = controller_header(sc, controller, horizon, gamma, seed)
-    robot_radius_m = header.pop("robot_radius_m")
+    settings, robot_radius_m = run_settings(sc, controller, horizon, gamma, seed)
     nmpc = implementation if implementation is not None else sc.make_controller(controller, horizon, gamma)
     episode_config = sc.episode_config(seed)
     if out_dir is not None:
@@ -82,16 +84,17 @@ def run_scenario(
         signum = interrupts.signum_of(exc)
         if out_dir is not None:
             name = signal.Signals(signum).name
-            write_summary(out_dir, {**header, "outcome": "interrupted", "interrupted_by": name, "steps": 0})
+            partial = {"outcome": "interrupted", "interrupted_by": name, "steps": 0}
+            write_summary(out_dir, {**asdict(settings), **partial})
         raise RunInterrupted(signum) from None
     finally:  # a recording cut short is still a valid file, and says so
         if recorder is not None and not finished:
             with interrupts.deferred():
                 recorder.close("ended early", "(interrupted or failed before its first control step)")
-    summary: dict[str, object] = {**header, **result.metrics.as_dict()}
+    summary = RunSummary(settings, result.metrics)
     if recorder is not None:
         with interrupts.deferred():
-            recorder.close(str(summary["outcome"]), f"after {summary['steps']} steps")
+            recorder.close(result.metrics.outcome, f"after {result.metrics.steps} steps")
     if out_dir is not None:
         with interrupts.deferred():
             result.trace.save(out_dir / TRACE_FILE)
@@ -128,7 +131,7 @@ def run_scenario_kinematic(
     horizon: int | None = None,
     gamma: float | None = None,
     robot_radius_m: float | None = None,
-) -> dict[str, object]:
+) -> RunSummary:
     """The same scenario on the controller's own unicycle model (no physics; the paper's setting).
 
     Clearance is measured on the circle model; `robot_radius_m` overrides the scenario's circle
@@ -188,39 +191,33 @@ def run_scenario_kinematic(
         judgement = judge_tracking(outcome, ep.times_s, errors, reachable, sc.tau_s, outcomes)
     converged = outcome == "reached" if is_setpoint else judgement.converged
     reversals, reverse_steps = count_reversals(ep.controls[:, 0])
-    return {
-        "scenario": sc.name,
-        "controller": controller,
-        "horizon": config.horizon,
-        "gamma": config.gamma,
-        "model": "kinematic",
-        "tau_s": config.tau_s,
-        "prediction_time_s": config.horizon * config.tau_s,
-        "v_min_mps": config.v_min_mps,
-        "v_max_mps": config.v_max_mps,
-        "omega_max_radps": config.omega_max_radps,
-        "outcome": outcome,
-        "collided": collided,
-        "converged": bool(converged),
-        "min_clearance_m": ep.min_clearance_m if obstacles else None,
-        "final_position_error_m": float(errors[-1]),
-        "tracking_rmse_m": rmse,
-        **(NO_TRACKING_FIELDS if judgement is None else judgement.fields()),
-        "time_to_goal_s": ep.time_to_goal_s,
-        "reversals": reversals,
-        "reverse_steps": reverse_steps,
-        "max_abs_v_mps": float(np.max(np.abs(ep.controls[:, 0]))),
-        "max_abs_omega_radps": float(np.max(np.abs(ep.controls[:, 1]))),
-        "safety_active_steps": ep.safety_active_steps,
-        "fallbacks": ep.fallbacks,
-        "solve_ms_median": 1000.0 * float(np.median(ep.solve_time_s)),
-        "robot_radius_m": config.robot_radius_m,
-        "steps": len(ep.controls),
-        "t_s": ep.times_s[:-1].tolist(),
-        "x_m": ep.states[:-1, 0].tolist(),
-        "y_m": ep.states[:-1, 1].tolist(),
-        "ref_x_m": refs[:-1, 0].tolist(),
-        "ref_y_m": refs[:-1, 1].tolist(),
-        "v_cmd_mps": ep.controls[:, 0].tolist(),
-        "omega_cmd_radps": ep.controls[:, 1].tolist(),
-    }
+    settings, _ = run_settings(sc, controller, horizon, gamma, model="kinematic")
+    return RunSummary(
+        settings,
+        KinematicMetrics(
+            outcome=outcome,
+            collided=collided,
+            converged=bool(converged),
+            min_clearance_m=ep.min_clearance_m if obstacles else None,
+            final_position_error_m=float(errors[-1]),
+            tracking_rmse_m=rmse,
+            **(NO_TRACKING_FIELDS if judgement is None else judgement.fields()),
+            time_to_goal_s=ep.time_to_goal_s,
+            reversals=reversals,
+            reverse_steps=reverse_steps,
+            max_abs_v_mps=float(np.max(np.abs(ep.controls[:, 0]))),
+            max_abs_omega_radps=float(np.max(np.abs(ep.controls[:, 1]))),
+            safety_active_steps=ep.safety_active_steps,
+            fallbacks=ep.fallbacks,
+            solve_ms_median=1000.0 * float(np.median(ep.solve_time_s)),
+            robot_radius_m=config.robot_radius_m,
+            steps=len(ep.controls),
+            t_s=ep.times_s[:-1].tolist(),
+            x_m=ep.states[:-1, 0].tolist(),
+            y_m=ep.states[:-1, 1].tolist(),
+            ref_x_m=refs[:-1, 0].tolist(),
+            ref_y_m=refs[:-1, 1].tolist(),
+            v_cmd_mps=ep.controls[:, 0].tolist(),
+            omega_cmd_radps=ep.controls[:, 1].tolist(),
+        ),
+    )

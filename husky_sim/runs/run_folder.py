@@ -12,12 +12,13 @@ import math
 import re
 import zipfile
 import zlib
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 import numpy as np
 
 from husky_sim import interrupts
+from husky_sim.runs.summary import RunSummary
 from husky_sim.sim.trace import EpisodeTrace
 
 #: Where runs go unless --out says otherwise, and the default folders of the suite and the claims.
@@ -91,8 +92,11 @@ def _json_safe(value: object) -> object:
     return value
 
 
-def write_summary(out_dir: Path, summary: dict[str, object]) -> None:
-    """summary.json (strict JSON), written whole even if a signal arrives meanwhile."""
+def write_summary(out_dir: Path, summary: RunSummary | Mapping[str, object]) -> None:
+    """summary.json (strict JSON; a RunSummary as its `as_dict()` record), written whole even if a
+    signal arrives meanwhile."""
+    if isinstance(summary, RunSummary):
+        summary = summary.as_dict()
     with interrupts.deferred():
         tmp = out_dir / (SUMMARY_FILE + ".tmp")
         tmp.write_text(json.dumps(_json_safe(summary), indent=2, allow_nan=False) + "\n")

@@ -119,11 +119,11 @@ def run_cell(cell: Cell, out_dir: Path | None) -> dict[str, object]:
         if cell.model == "kinematic":
             summary = run_scenario_kinematic(
                 cell.scenario, cell.controller, cell.horizon, cell.gamma, cell.robot_radius_m
-            )
+            ).as_dict()
         else:
             summary = run_scenario(
                 cell.scenario, cell.controller, cell.horizon, cell.gamma, cell.seed, run_dir
-            )
+            ).as_dict()
     except Exception as exc:  # noqa: BLE001 - reported per cell, the suite goes on
         return _error_row(cell, exc, out_dir)
     summary["run_dir"] = str(Path("runs") / cell.label()) if run_dir is not None else ""

@@ -248,9 +248,9 @@ def test_run_sample_matches_run_scenario_in_process() -> None:
     p = sample_perturbations(PerturbationRanges(), 1, 8)[0]
     sc = apply_perturbation(base, p)
     [result] = run_tasks([SampleTask(0, sc.model_dump(mode="json"), "bt")], "local", jobs=1)
-    direct = run_scenario(sc, "bt")
-    assert result["min_clearance_m"] == direct["min_clearance_m"]
-    assert result["outcome"] == direct["outcome"]
+    direct = run_scenario(sc, "bt").metrics
+    assert result["min_clearance_m"] == direct.min_clearance_m
+    assert result["outcome"] == direct.outcome
 
 
 # -- bad input ---------------------------------------------------------------------------------

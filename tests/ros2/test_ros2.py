@@ -324,10 +324,10 @@ def test_rehearsal_over_dds_reaches_the_in_process_outcome(tmp_path: Path) -> No
     loop amplifies: the plain in-process run differs from step 12 on)."""
     sc = load_scenario("husky_point_stabilisation").with_overrides(horizon=5)
     rehearsed = rehearse(sc, "husky-cbf", tmp_path / "rehearsal", domain_id=_domain())
-    direct = run_scenario(sc, "husky-cbf", out_dir=tmp_path / "direct")
+    direct = run_scenario(sc, "husky-cbf", out_dir=tmp_path / "direct").metrics
     transport = rehearsed["transport"]
     assert transport["node"]["overrun_events"] == 0, "machine too slow: a solve took longer than tau"
-    assert rehearsed["outcome"] == direct["outcome"] == "reached"
+    assert rehearsed["outcome"] == direct.outcome == "reached"
     assert not rehearsed["collided"] and rehearsed["min_clearance_m"] > 0
     assert transport["reply_timeouts"] == 0 and transport["node_exit_code"] == 0
     assert transport["node"]["goals_received"] == 1 and transport["node"]["stale_events"] == 0
@@ -340,8 +340,8 @@ def test_rehearsal_over_dds_reaches_the_in_process_outcome(tmp_path: Path) -> No
         "husky-cbf",
         out_dir=tmp_path / "encoded",
         implementation=_AsSeenOverRos2(sc.make_controller("husky-cbf")),
-    )
-    assert encoded["steps"] == rehearsed["steps"]
+    ).metrics
+    assert encoded.steps == rehearsed["steps"]
     over_dds = list(csv.DictReader((tmp_path / "rehearsal" / "log.csv").open()))
     in_process = list(csv.DictReader((tmp_path / "encoded" / "log.csv").open()))
     assert [[r[c] for c in ROBOT_COLUMNS] for r in over_dds] == [
@@ -366,10 +366,10 @@ def test_run_mcap_has_foxglove_channels_and_one_message_per_step(tmp_path: Path)
     from mcap_protobuf.decoder import DecoderFactory
 
     summaries = [
-        run_scenario("head_on_moving_obstacle", "husky-cbf", horizon=5, out_dir=tmp_path / name)
+        run_scenario("head_on_moving_obstacle", "husky-cbf", horizon=5, out_dir=tmp_path / name).metrics
         for name in "ab"
     ]
-    steps = summaries[0]["steps"]
+    steps = summaries[0].steps
     path = tmp_path / "a" / MCAP_NAME
     with path.open("rb") as f:
         reader = make_reader(f)
@@ -385,7 +385,7 @@ def test_run_mcap_has_foxglove_channels_and_one_message_per_step(tmp_path: Path)
     }
     counts, data = _mcap_messages(path)
     assert all(counts[c] == steps for c in STEP_CHANNELS)
-    assert summaries[0]["outcome"].encode() in data["/outcome"][0]
+    assert summaries[0].outcome.encode() in data["/outcome"][0]
     with path.open("rb") as f:  # decoded with the schema the file carries, as Foxglove does
         reader = make_reader(f, decoder_factories=[DecoderFactory()])
         scenes = [m for _s, _c, _m, m in reader.iter_decoded_messages(topics=["/scene"])]

@@ -19,6 +19,7 @@ from husky_sim.runs.run_folder import (
     write_results_csv,
     write_summary,
 )
+from husky_sim.runs.summary import KinematicMetrics, RunSettings, RunSummary
 
 
 def test_a_summary_round_trips_as_strict_json(tmp_path: Path) -> None:
@@ -26,6 +27,40 @@ def test_a_summary_round_trips_as_strict_json(tmp_path: Path) -> None:
     assert read_summary(tmp_path, ["outcome"]) == {"outcome": "reached", "min_clearance_m": None, "steps": 3}
     with pytest.raises(RunFolderError, match=r"summary.json: not a run summary \(missing horizon\)"):
         read_summary(tmp_path, ["outcome", "horizon"])
+
+
+def test_a_typed_run_summary_is_written_as_its_flat_record(tmp_path: Path) -> None:
+    settings = RunSettings("s", "cbf", 5, 0.1, 7, "kinematic", 0.1, 0.5, -1.0, 1.0, 0.78)
+    series = {
+        k: [0.0, 0.1] for k in ("t_s", "x_m", "y_m", "ref_x_m", "ref_y_m", "v_cmd_mps", "omega_cmd_radps")
+    }
+    metrics = KinematicMetrics(
+        "timeout",
+        False,
+        False,
+        0.4,
+        2.0,
+        None,
+        None,
+        None,
+        None,
+        None,
+        0,
+        0,
+        1.0,
+        0.5,
+        3,
+        0,
+        4.2,
+        0.25,
+        2,
+        **series,
+    )
+    write_summary(tmp_path, RunSummary(settings, metrics))
+    written = read_summary(tmp_path, ["scenario", "outcome", "t_s"])
+    assert written == RunSummary(settings, metrics).as_dict()
+    assert list(written)[:6] == ["scenario", "controller", "horizon", "gamma", "seed", "model"]
+    assert written["seed"] == 7 and written["robot_radius_m"] == 0.25 and written["x_m"] == [0.0, 0.1]
 
 
 def test_unusable_folders_name_the_file(tmp_path: Path) -> None:

@@ -19,6 +19,7 @@ from controllers.husky_cbf.guidance import Guidance, segment_blocked
 from controllers.husky_cbf.model import extended_step
 from husky_sim.runs.run import run_scenario
 from husky_sim.runs.scenario import load_scenario, shipped_scenarios
+from husky_sim.runs.summary import RunSummary
 from husky_sim.sim.geometry import load_geometry
 
 pytestmark = pytest.mark.physics  # PyBullet or closed loops throughout (`make test-fast` skips)
@@ -51,21 +52,22 @@ def _cells(paths: list[Path]) -> list[object]:
     return params
 
 
-def _assert_safe_and_converged(summary: dict[str, object]) -> None:
+def _assert_safe_and_converged(summary: RunSummary) -> None:
     """No collision (physics clearance > 0), converged, and the obstacles shaped the run: the
     obstacle constraint was active or guidance steered round them at some step (a run that
     neither touched would test nothing)."""
+    m = summary.metrics
     measured = (
-        f"outcome {summary['outcome']}, min clearance {summary['min_clearance_m']}, "
-        f"final error {summary['final_position_error_m']:.3f} m, "
-        f"tracking rmse (reachable) {summary.get('tracking_rmse_reachable_m')}, "
-        f"soft steps {summary['soft_constraint_steps']}, fallbacks {summary['fallbacks']}"
+        f"outcome {m.outcome}, min clearance {m.min_clearance_m}, "
+        f"final error {m.final_position_error_m:.3f} m, "
+        f"tracking rmse (reachable) {m.tracking_rmse_reachable_m}, "
+        f"soft steps {m.soft_constraint_steps}, fallbacks {m.fallbacks}"
     )
-    assert not summary["collided"] and summary["min_clearance_m"] > 0.0, f"collision ({measured})"
-    assert summary["converged"], f"not converged ({measured})"
-    assert summary["safety_active_steps"] + summary["guided_steps"] > 0, (
-        f"obstacles never mattered ({measured})"
+    assert not m.collided and m.min_clearance_m is not None and m.min_clearance_m > 0.0, (
+        f"collision ({measured})"
     )
+    assert m.converged, f"not converged ({measured})"
+    assert m.safety_active_steps + m.guided_steps > 0, f"obstacles never mattered ({measured})"
 
 
 @pytest.mark.parametrize(("scenario", "horizon"), _cells(shipped_scenarios()))

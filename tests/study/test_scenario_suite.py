@@ -77,14 +77,16 @@ def _param(cell: Cell, entry: dict[str, object]) -> object:
 def test_scenario_cell(cell: Cell, entry: dict[str, object]) -> None:
     scenario = _on_table_solver(cell.scenario)
     assert scenario.controller_config(cell.controller).solver.backend == TABLE_SOLVER
-    summary = run_scenario(scenario, cell.controller, cell.horizon, cell.gamma)
+    m = run_scenario(scenario, cell.controller, cell.horizon, cell.gamma).metrics
     measured = (
-        f"outcome {summary['outcome']}, converged {summary['converged']}, "
-        f"min clearance {summary['min_clearance_m']}, active steps {summary['safety_active_steps']}"
+        f"outcome {m.outcome}, converged {m.converged}, "
+        f"min clearance {m.min_clearance_m}, active steps {m.safety_active_steps}"
     )
-    assert not summary["collided"] and summary["min_clearance_m"] > 0.0, f"collision ({measured})"
+    assert not m.collided and m.min_clearance_m is not None and m.min_clearance_m > 0.0, (
+        f"collision ({measured})"
+    )
     if entry["outcome"] == "collided":
         return  # no collision this time: the strict xfail turns this pass into a loud failure
-    assert summary["safety_active_steps"] > 0, f"the obstacle constraint never activated ({measured})"
-    assert summary["outcome"] == entry["outcome"], measured
-    assert summary["converged"] == entry["converged"], measured
+    assert m.safety_active_steps > 0, f"the obstacle constraint never activated ({measured})"
+    assert m.outcome == entry["outcome"], measured
+    assert m.converged == entry["converged"], measured

@@ -91,14 +91,15 @@ def test_suite_runs_in_parallel_and_writes_results_and_figures(tmp_path: Path) -
     assert (out / "plots" / "comparison_husky_point_stabilisation.png").stat().st_size > 10_000
 
 
-def test_parallel_and_serial_suites_agree(tmp_path: Path) -> None:
+def test_parallel_serial_and_dask_suites_agree(tmp_path: Path) -> None:
     scenario = str(_short_scenario(tmp_path, "head_on_moving_obstacle", 3.0))
     cells = matrix([scenario], ["cbf", "relax-cbf"], [5])
     serial = run_suite(cells, jobs=1, progress=False)
     parallel = run_suite(cells, jobs=2, progress=False)
-    for a, b in zip(serial, parallel, strict=True):
+    on_dask = run_suite(cells, jobs=2, progress=False, backend="dask")
+    for a, b, c in zip(serial, parallel, on_dask, strict=True):
         for key in ("outcome", "min_clearance_m", "final_position_error_m", "safety_active_steps"):
-            assert a[key] == b[key], key
+            assert a[key] == b[key] == c[key], key
 
 
 def test_a_crashing_cell_is_reported_not_raised() -> None:
@@ -116,7 +117,12 @@ def test_markdown_table_formats_missing_and_float_values() -> None:
 
 def test_cli_errors_are_one_line_with_exit_code_2(tmp_path: Path) -> None:
     husky_sim = Path(sys.executable).with_name("husky-sim")
-    for args in (["suite", "--scenarios", "no_such_scenario"], ["suite", "--horizons", "0"], ["run", "nope"]):
+    for args in (
+        ["suite", "--scenarios", "no_such_scenario"],
+        ["suite", "--horizons", "0"],
+        ["suite", "--scheduler", "tcp://127.0.0.1:8786"],  # needs --backend dask
+        ["run", "nope"],
+    ):
         proc = subprocess.run([str(husky_sim), *args], capture_output=True, text=True, cwd=tmp_path)
         assert proc.returncode == 2, args
         assert len(proc.stderr.strip().splitlines()) == 1, proc.stderr
@@ -258,8 +264,8 @@ def test_kinematic_tracking_run_shorter_than_settle_time_has_no_rmse_and_does_no
     from husky_sim.runs.scenario import load_scenario
 
     sc = load_scenario("husky_circle_tracking").model_copy(update={"duration_s": 1.0})
-    summary = run_scenario_kinematic(sc, "cbf", 5)
-    assert summary["tracking_rmse_m"] is None and summary["converged"] is False
+    metrics = run_scenario_kinematic(sc, "cbf", 5).metrics
+    assert metrics.tracking_rmse_m is None and metrics.converged is False
 
 
 def test_results_md_explains_every_outcome_word_it_shows() -> None:
