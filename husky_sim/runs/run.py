@@ -17,28 +17,30 @@ from husky_sim.sim.episode import run_episode
 from husky_sim.sim.geometry import load_geometry
 
 
-def run_settings(
-    sc: Scenario,
-    controller: str,
-    horizon: int | None = None,
-    gamma: float | None = None,
-    seed: int | None = None,
-    model: Model = "physics",
-) -> tuple[RunSettings, float]:
-    """Which controller runs with which settings (from the scenario and the overrides; building the
-    controller is not needed), and the controller's robot circle (m)."""
+def resolved(
+    scenario: Scenario | str, horizon: int | None = None, gamma: float | None = None, seed: int | None = None
+) -> Scenario:
+    """The scenario (a shipped name, a path or a Scenario) with the overrides applied and validated
+    by the schema: the one place a run's N, gamma and seed are decided (Scenario.with_overrides)."""
+    sc = load_scenario(scenario) if isinstance(scenario, str) else scenario
+    return sc.with_overrides(horizon, gamma, seed) if (horizon, gamma, seed) != (None, None, None) else sc
+
+
+def run_settings(sc: Scenario, controller: str, model: Model = "physics") -> tuple[RunSettings, float]:
+    """Which controller runs on the resolved scenario with which settings (building the controller
+    is not needed), and the controller's robot circle (m)."""
     if controller == "husky-cbf":
-        full = sc.husky_cbf_config(horizon, gamma)
+        full = sc.husky_cbf_config()
         nmpc_config, omega_max = full.nmpc, full.omega_cmd_max_radps
     else:
-        nmpc_config = sc.controller_config(controller, horizon, gamma)
+        nmpc_config = sc.controller_config(controller)
         omega_max = nmpc_config.omega_max_radps
     settings = RunSettings(
         scenario=sc.name,
         controller=controller,
         horizon=nmpc_config.horizon,
         gamma=nmpc_config.gamma,
-        seed=sc.seed if seed is None else seed,
+        seed=sc.seed,
         model=model,
         tau_s=nmpc_config.tau_s,
         prediction_time_s=nmpc_config.horizon * nmpc_config.tau_s,
@@ -65,10 +67,10 @@ def run_scenario(
     `implementation` runs in the controller's place (a rehearsal's DDS robot, whose decisions come
     from the named controller in another process); by default the named controller is built here.
     """
-    sc = load_scenario(scenario) if isinstance(scenario, str) else scenario
-    settings, robot_radius_m = run_settings(sc, controller, horizon, gamma, seed)
-    nmpc = implementation if implementation is not None else sc.make_controller(controller, horizon, gamma)
-    episode_config = sc.episode_config(seed)
+    sc = resolved(scenario, horizon, gamma, seed)
+    settings, robot_radius_m = run_settings(sc, controller)
+    nmpc = implementation if implementation is not None else sc.make_controller(controller)
+    episode_config = sc.episode_config()
     if out_dir is not None:
         prepare_out_dir(out_dir)
     log_path = out_dir / LOG_FILE if out_dir is not None else None
@@ -149,10 +151,10 @@ def run_scenario_kinematic(
     from husky_sim.sim.metrics import NO_TRACKING_FIELDS, count_reversals, judge_tracking, tracking_rmse
     from husky_sim.sim.outcomes import final_outcome, reference_reachable
 
-    sc = load_scenario(scenario) if isinstance(scenario, str) else scenario
+    sc = resolved(scenario, horizon, gamma)
     if controller not in SAFETY_CONSTRAINTS:
         raise ValueError(f"controller: the kinematic loop runs {SAFETY_CONSTRAINTS}, got {controller!r}")
-    config = sc.controller_config(controller, horizon, gamma)
+    config = sc.controller_config(controller)
     if robot_radius_m is not None:
         config = replace(config, robot_radius_m=robot_radius_m)
     problem = sc.kinematic_problem(config.robot_radius_m)
@@ -191,7 +193,7 @@ def run_scenario_kinematic(
         judgement = judge_tracking(outcome, ep.times_s, errors, reachable, sc.tau_s, outcomes)
     converged = outcome == "reached" if is_setpoint else judgement.converged
     reversals, reverse_steps = count_reversals(ep.controls[:, 0])
-    settings, _ = run_settings(sc, controller, horizon, gamma, model="kinematic")
+    settings, _ = run_settings(sc, controller, model="kinematic")
     return RunSummary(
         settings,
         KinematicMetrics(

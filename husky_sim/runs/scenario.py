@@ -490,12 +490,11 @@ class Scenario(_Strict):
         c = self.reference.circle
         return CircleTrajectory(c.radius_m, c.angular_rate_radps, c.center_x_m, c.center_y_m, c.phase_rad)
 
-    def controller_config(
-        self, safety: SafetyConstraint, horizon: int | None = None, gamma: float | None = None
-    ) -> NMPCConfig:
+    def controller_config(self, safety: SafetyConstraint) -> NMPCConfig:
+        """The NMPC's configuration for this scenario with the obstacle constraint `safety` (N and
+        gamma are the file's: overrides are applied once, by `with_overrides`)."""
         # ControllerSpec's fields are NMPCConfig's fields by name; `solver` names SolverOptions.backend
         fields = self.controller.model_dump()
-        fields.update(horizon=horizon or fields["horizon"], gamma=fields["gamma"] if gamma is None else gamma)
         backend = fields.pop("solver")
         if backend is not None:
             fields["solver"] = SolverOptions(backend=backend)
@@ -507,7 +506,7 @@ class Scenario(_Strict):
             obstacle_slots=max(len(self.obstacle_specs()), 1),
         )
 
-    def husky_cbf_config(self, horizon: int | None = None, gamma: float | None = None) -> HuskyCBFConfig:
+    def husky_cbf_config(self) -> HuskyCBFConfig:
         """husky-cbf's configuration: the file's NMPC settings (Relax-CBF), the drive's limits, the
         robot's identified yaw response and the URDF's footprint."""
         drive = self.drive.config()
@@ -515,7 +514,7 @@ class Scenario(_Strict):
         geometry = load_geometry()
         slots = min(max(len(self.obstacle_specs()), 1), HuskyCBFConfig.slots)
         return HuskyCBFConfig(
-            nmpc=self.controller_config("relax-cbf", horizon, gamma),
+            nmpc=self.controller_config("relax-cbf"),
             response=RobotResponse(
                 drive.max_linear_accel_mps2,
                 drive.max_angular_accel_radps2,
@@ -529,15 +528,14 @@ class Scenario(_Strict):
             slots=slots,
         )
 
-    def make_controller(
-        self, name: str, horizon: int | None = None, gamma: float | None = None
-    ) -> Controller:
+    def make_controller(self, name: str) -> Controller:
         """The controller called `name` (controllers.CONTROLLER_NAMES) configured for this scenario."""
         if name == "husky-cbf":
-            return HuskyCBFController(self.husky_cbf_config(horizon, gamma))
-        return NMPCController(self.controller_config(name, horizon, gamma))
+            return HuskyCBFController(self.husky_cbf_config())
+        return NMPCController(self.controller_config(name))
 
-    def episode_config(self, seed: int | None = None) -> EpisodeConfig:
+    def episode_config(self) -> EpisodeConfig:
+        """Everything the PyBullet episode needs besides the controller and the reference."""
         f = self.friction
         return EpisodeConfig(
             start=(self.robot.start.x_m, self.robot.start.y_m, self.robot.start.yaw_rad),
@@ -553,7 +551,7 @@ class Scenario(_Strict):
             sensing=SensingConfig(**self.sensing.model_dump()),  # same field names
             outcomes=Outcomes(**self.success.model_dump()),  # same field names
             payload_kg=self.robot.payload_kg,
-            seed=self.seed if seed is None else seed,
+            seed=self.seed,
         )
 
 

@@ -193,7 +193,7 @@ def _wait_matched(robot: _Robot) -> None:
 @pytest.fixture(scope="module")
 def husky_cbf():
     sc = load_scenario("husky_point_stabilisation")
-    return sc, sc.make_controller("husky-cbf", 5)
+    return sc, sc.with_overrides(horizon=5).make_controller("husky-cbf")
 
 
 def _start_node(controller, reference, tau_s: float, settings: Ros2Settings, out: Path, budget_s=None):
