@@ -62,3 +62,27 @@ def test_controllers_never_import_the_simulator() -> None:
         if name.split(".")[0] == "husky_sim"
     ]
     assert not crossings, crossings
+
+
+def _controller_solve_calls(path: Path) -> int:
+    """Calls `x.solve(state, reference, obstacles, t)`: a closed loop asking a Controller for its
+    command (controllers.interface; the solver benchmark's two-argument `solver.solve` replays
+    recorded problems, not a loop)."""
+    return sum(
+        isinstance(node, ast.Call)
+        and isinstance(node.func, ast.Attribute)
+        and node.func.attr == "solve"
+        and len(node.args) + len(node.keywords) == 4
+        for node in ast.walk(ast.parse(path.read_text()))
+    )
+
+
+def test_one_closed_loop_drives_every_simulated_plant() -> None:
+    """The PyBullet Husky and the kinematic unicycle both run through sim/rollout.py; the only
+    other caller is the ROS 2 node, which answers a robot's odometry instead of simulating."""
+    callers = {
+        str(path.relative_to(ROOT)): n
+        for path in sorted((ROOT / "husky_sim").rglob("*.py"))
+        if (n := _controller_solve_calls(path))
+    }
+    assert callers == {"husky_sim/sim/rollout.py": 1, "husky_sim/ros2/node.py": 1}
