@@ -1,4 +1,5 @@
-"""`husky-sim bench` (solve times per backend) and `husky-sim bench-sim` (closed-loop real-time factor)."""
+"""`husky-sim bench` (solve times per backend), `bench-sim` (closed-loop real-time factor) and
+`bench-divergence` (where FATROP's and IPOPT's closed loops part on one cell)."""
 
 from __future__ import annotations
 
@@ -6,6 +7,7 @@ import argparse
 
 from husky_sim.cli.common import (
     CONTROLLER_CHOICES,
+    HORIZON_HELP,
     SOLVER_CHOICES,
     count_arg,
     horizon_arg,
@@ -57,8 +59,17 @@ def cmd_bench_sim(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_bench_divergence(args: argparse.Namespace) -> int:
+    from husky_sim.bench.divergence import trace_divergence
+    from husky_sim.runs.scenario import load_scenario
+
+    sc = load_scenario(args.scenario).with_overrides(args.horizon, args.gamma)
+    print(trace_divergence(sc, args.controller).report())
+    return 0
+
+
 def add_parsers(sub: argparse._SubParsersAction) -> None:
-    """Register `bench`, `bench-sim`."""
+    """Register `bench`, `bench-sim`, `bench-divergence`."""
     bench = sub.add_parser(
         "bench", help="NMPC solve times of every solver backend on the same recorded closed-loop problems"
     )
@@ -99,3 +110,13 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
         help="also print the yaw rate achieved with payload, torque, friction",
     )
     bench_sim.set_defaults(func=cmd_bench_sim)
+    divergence = sub.add_parser(
+        "bench-divergence",
+        help="where one PyBullet cell's FATROP and IPOPT closed loops part, and whether that is a "
+        "different local optimum",
+    )
+    divergence.add_argument("scenario", help="a scenario YAML path or the name of a shipped scenario")
+    divergence.add_argument("--controller", choices=CONTROLLER_CHOICES[1:4], default="cbf")
+    divergence.add_argument("--horizon", type=horizon_arg, default=None, help=HORIZON_HELP)
+    divergence.add_argument("--gamma", type=unit_float_arg, default=None, help="CBF decay rate in [0, 1]")
+    divergence.set_defaults(func=cmd_bench_divergence)
