@@ -4,7 +4,7 @@ part on one PyBullet cell, and whether that is a different local optimum.
 The cell runs twice with every setting equal but the NLP backend (FATROP, the default, and IPOPT,
 the backend the scenario table is measured with), recording each step's problem. At the first
 control step whose commands differ by more than PART_TOL, the FATROP loop's problem is solved
-again by cold IPOPT converged to 1e-10 (bench.solvers.CONVERGED_TOL), and both answers' objectives
+again by cold IPOPT converged to 1e-10 (bench.solvers.converged_solver), and both answers' objectives
 are given. If converged IPOPT gives FATROP's command there, the solvers agree on that problem and
 the loops parted because their states had (`poses_part_step`: the first step whose positions
 differ by more than 1e-6 m); if it gives the IPOPT loop's command from (nearly) the same pose, the
@@ -19,9 +19,8 @@ import casadi as ca
 import numpy as np
 
 from controllers import ControlResult, NMPCConfig, NMPCController
-from controllers.backends import make_solver
 from controllers.ocp import Plan, layout_for, paper_nlp
-from husky_sim.bench.solvers import CONVERGED_TOL, REFERENCE
+from husky_sim.bench.solvers import REFERENCE, converged_solver
 from husky_sim.runs.scenario import Scenario
 from husky_sim.sim.episode import EpisodeResult, run_episode
 
@@ -98,6 +97,11 @@ def _loop(scenario: Scenario, controller: str, backend: str) -> tuple[NMPCConfig
     return config, result, [(p, g, d) for (p, g), d in zip(problems, answers.decisions, strict=True)]
 
 
+def _position_gap(a: dict[str, object], b: dict[str, object]) -> float:
+    """The larger of the x and y differences (m) of two log rows."""
+    return float(max(abs(a["x_m"] - b["x_m"]), abs(a["y_m"] - b["y_m"])))
+
+
 def trace_divergence(scenario: Scenario, controller: str) -> Divergence:
     """Both loops of the resolved scenario (overrides applied) with one of the paper's controllers."""
     config, ipopt, _ = _loop(scenario, controller, REFERENCE)
@@ -106,11 +110,7 @@ def trace_divergence(scenario: Scenario, controller: str) -> Divergence:
     label = f"{scenario.name} {controller} N={config.horizon}{gamma}"
     rows = list(zip(ipopt.rows, fatrop.rows, strict=False))
     poses_part = next(
-        (
-            k
-            for k, (a, b) in enumerate(rows)
-            if max(abs(a["x_m"] - b["x_m"]), abs(a["y_m"] - b["y_m"])) > POSE_TOL_M
-        ),
+        (k for k, (a, b) in enumerate(rows) if _position_gap(a, b) > POSE_TOL_M),
         None,
     )
     base = Divergence(
@@ -128,17 +128,14 @@ def trace_divergence(scenario: Scenario, controller: str) -> Divergence:
             continue
         nlp = paper_nlp(config)
         objective = ca.Function("J", [nlp.problem["x"], nlp.problem["p"]], [nlp.problem["f"]])
-        options = replace(
-            config.solver, backend=REFERENCE, tol=CONVERGED_TOL, acceptable_tol=CONVERGED_TOL, max_iter=3000
-        )
         parameters, guess, answer = fatrop_problems[k]
-        solved = make_solver(nlp, options).solve(parameters, guess)
+        solved = converged_solver(config).solve(parameters, guess)
         converged = Plan.from_vector(solved.decision, layout_for(config)).controls[0]
         return replace(
             base,
             part_step=k,
             part_t_s=float(a["t_s"]),
-            pose_difference_m=float(max(abs(a["x_m"] - b["x_m"]), abs(a["y_m"] - b["y_m"]))),
+            pose_difference_m=_position_gap(a, b),
             commands={REFERENCE: command(a), "fatrop": command(b)},
             converged=(float(converged[0]), float(converged[1])),
             objectives={

@@ -24,6 +24,7 @@ import numpy as np
 
 from controllers import SAFETY_CONSTRAINTS, NMPCConfig, NMPCController
 from controllers.backends import make_solver
+from controllers.backends.ipopt import IpoptSolver
 from controllers.backends.opti import OptiSolver
 from controllers.config import SOLVER_BACKENDS, SolverOptions
 from controllers.ocp import Plan, layout_for, paper_nlp
@@ -121,12 +122,18 @@ def replay(config: NMPCConfig, backend: str, problems: Sequence[RecordedProblem]
     }
 
 
-def converged_first_controls(config: NMPCConfig, problems: Sequence[RecordedProblem]) -> np.ndarray:
-    """First control of each problem solved by IPOPT cold from its guess to CONVERGED_TOL."""
+def converged_solver(config: NMPCConfig) -> IpoptSolver:
+    """IPOPT on the paper's NLP of `config`, converged to CONVERGED_TOL (no acceptable exit): the
+    answer other backends are compared with (call `reset` before each problem to solve it cold)."""
     options = replace(
         config.solver, backend=REFERENCE, tol=CONVERGED_TOL, acceptable_tol=CONVERGED_TOL, max_iter=3000
     )
-    solver = make_solver(paper_nlp(config), options)
+    return make_solver(paper_nlp(config), options)
+
+
+def converged_first_controls(config: NMPCConfig, problems: Sequence[RecordedProblem]) -> np.ndarray:
+    """First control of each problem solved by IPOPT cold from its guess to CONVERGED_TOL."""
+    solver = converged_solver(config)
     layout = layout_for(config)
     first = []
     for problem in problems:

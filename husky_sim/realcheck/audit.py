@@ -330,7 +330,8 @@ def measure_solve_times(
 ) -> np.ndarray:
     """Wall times (s) of `solves` NMPC solves on the scenario's kinematic closed loop on this
     machine; the loop restarts from the start pose when a set-point is reached early."""
-    nmpc = scenario.with_overrides(horizon=horizon).make_controller(controller)
+    scenario = scenario.with_overrides(horizon=horizon)
+    nmpc = scenario.make_controller(controller)
     problem = scenario.kinematic_problem(allow_waypoints=True)
     times: list[float] = []
     while len(times) < solves:

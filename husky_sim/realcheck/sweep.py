@@ -12,9 +12,8 @@ still knows exactly. What a real robot gets wrong is its *estimate* of that velo
 therefore scales the velocity the controller is told (``sensing.obstacle_velocity_scale``, 0.8
 to 1.2 by default) while the obstacles keep their true motion.
 
-Execution backends (the same picklable `run_sample` for both, so results are identical):
-
-Both through husky_sim.runs.parallel.parallel_map, as the suite's cells:
+Execution backends, both through husky_sim.runs.parallel.parallel_map as the suite's cells are
+(the same picklable `run_sample` for both, so results are identical):
 
 - ``local`` (default): husky_sim.runs.parallel.process_map on this machine's cores
   (``spawn`` start method: CasADi/IPOPT and PyBullet are not fork-safe once threads exist).

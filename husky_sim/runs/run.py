@@ -159,7 +159,6 @@ def run_scenario_kinematic(
         config = replace(config, robot_radius_m=robot_radius_m)
     problem = sc.kinematic_problem(config.robot_radius_m)
     obstacles, reference = problem.obstacles, problem.reference
-    s = sc.success
     outcomes = sc.episode_config().outcomes
     ep = run_kinematic(
         NMPCController(config),
@@ -174,7 +173,7 @@ def run_scenario_kinematic(
     is_setpoint = isinstance(reference, SetPoint)
     refs = np.array([reference.state_at(t) for t in ep.times_s])
     errors = np.hypot(*(ep.states[:, :2] - refs[:, :2]).T)
-    rmse = None if is_setpoint else tracking_rmse(errors, ep.times_s, s.tracking_settle_s)
+    rmse = None if is_setpoint else tracking_rmse(errors, ep.times_s, outcomes.tracking_settle_s)
     collided = ep.outcome == "collided"
     outcome = final_outcome(ep.outcome, collided=collided, is_setpoint=is_setpoint)
     judgement = None

@@ -29,7 +29,6 @@ from controllers import (
     Controller,
     NMPCConfig,
     NMPCController,
-    Obstacle,
     Reference,
     SafetyConstraint,
     SetPoint,
@@ -468,17 +467,12 @@ class Scenario(_Strict):
         specs = self.obstacle_specs()
         if not allow_waypoints and any(o.waypoints for o in specs):
             raise ValueError(f"{self.name}: waypoint obstacles have no constant-velocity kinematic model")
-        obstacles = []
-        for spec in specs:
-            centre, velocity = spec.state_at(0.0)
-            x, y, vx, vy = float(centre[0]), float(centre[1]), float(velocity[0]), float(velocity[1])
-            obstacles.append(Obstacle(x, y, spec.radius_m, vx, vy))
         start = self.robot.start
         return KinematicProblem(
             name=self.name,
             start=(start.x_m, start.y_m, start.yaw_rad),
             reference=self.reference_object(),
-            obstacles=tuple(obstacles),
+            obstacles=tuple(spec.circle_at(0.0) for spec in specs),
             robot_radius_m=self.robot.radius() if robot_radius_m is None else robot_radius_m,
             duration_s=self.duration_s,
         )

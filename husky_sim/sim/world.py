@@ -63,6 +63,11 @@ class ObstacleSpec:
             travelled -= length
         return points[-1], np.zeros(2)
 
+    def circle_at(self, t_s: float) -> Obstacle:
+        """The controller's view of this obstacle at time t_s: its circle and its velocity then."""
+        centre, vel = self.state_at(t_s)
+        return Obstacle(float(centre[0]), float(centre[1]), self.radius_m, float(vel[0]), float(vel[1]))
+
 
 @dataclass(frozen=True)
 class WorldConfig:
@@ -167,13 +172,7 @@ class World:
     def obstacle_states(self, t_s: float | None = None) -> list[Obstacle]:
         """True obstacle circles (centre, radius, velocity) at time t_s (default: now)."""
         t = self.time_s if t_s is None else t_s
-        out = []
-        for spec in self.config.obstacles:
-            centre, vel = spec.state_at(t)
-            out.append(
-                Obstacle(float(centre[0]), float(centre[1]), spec.radius_m, float(vel[0]), float(vel[1]))
-            )
-        return out
+        return [spec.circle_at(t) for spec in self.config.obstacles]
 
     def close(self) -> None:
         if p.isConnected(self.client):
