@@ -27,7 +27,7 @@ from functools import lru_cache
 import casadi as ca
 import numpy as np
 
-from controllers.backends.nlp import NLP
+from controllers.backends.nlp import NLP, RedundantBounds
 from controllers.backends.stagewise import StageIndices
 from controllers.config import NMPCConfig
 from controllers.constraints import SAFETY_BUILDERS, barrier
@@ -291,4 +291,28 @@ def paper_nlp(config: NMPCConfig) -> NLP:
     ubg = np.concatenate([np.zeros(n_eq), np.full(n_ineq, INF)])
     lbx, ubx = decision_bounds(config, problem.layout)
     nlp = {"x": problem.decision, "p": problem.parameters, "f": expr.cost, "g": g}
-    return NLP("nmpc", nlp, (lbx, ubx, lbg, ubg), problem.layout.stages())
+    return NLP("nmpc", nlp, (lbx, ubx, lbg, ubg), problem.layout.stages(), redundant_bounds(config, problem))
+
+
+def redundant_bounds(config: NMPCConfig, problem: SXProblem) -> tuple[RedundantBounds, ...]:
+    """The slacks' bounds that never decide the optimum (NLP.redundant):
+    - s_v >= 0, always: s_v < 0 only tightens the CLF row and costs W1 s_v^2, and at a KKT point
+      2 W1 s_v = lambda_clf >= 0;
+    - Relax-CBF's s_h <= 1 while every obstacle's barrier at the measured state is positive: then
+      B(k+1) >= s_h (1 - gamma) B(k) with s_h >= 0 keeps every predicted B(k) >= 0, an s_h above 1
+      only tightens the row and costs more, and at a KKT point 2 W2 (s_h - 1) = -sum lambda
+      (1 - gamma) B(k) <= 0. Inside an obstacle's set the bound matters (controllers.constraints).
+    """
+    layout = problem.layout
+    n, first_clf = layout.horizon, STATE_DIM * (layout.horizon + 1) + CONTROL_DIM * layout.horizon
+    bounds = [RedundantBounds(tuple(range(first_clf, first_clf + n)), "lower", ca.SX(1.0))]
+    if layout.has_decay_slack:
+        par = split_parameters(problem.parameters, layout)
+        position = par["feedback"][:2]
+        barriers = [
+            barrier(position, centre[:, 0], config.robot_radius_m + radius)
+            for centre, radius in zip(par["centres"], par["radii"], strict=True)
+        ]
+        holds = ca.mmin(ca.vertcat(*barriers)) if barriers else ca.SX(1.0)
+        bounds.append(RedundantBounds(tuple(range(first_clf + n, first_clf + 2 * n)), "upper", holds))
+    return tuple(bounds)

@@ -8,7 +8,7 @@ compiled): it scales the objective, calls FATROP and returns the solution, so ea
 call of compiled code. The bounds are its inputs, so configurations that differ only in bounds
 share one compiled solver. Its status shim tells which exit FATROP took.
 
-Two decisions make FATROP converge where it used to stall (README, "Solver backends"):
+Three decisions make FATROP converge where it used to stall (README, "Solver backends"):
 - **Objective scaling per solve**, as IPOPT's gradient-based scaling does, but to a largest
   gradient entry of GRADIENT_SCALE (IPOPT: 100) at the guess. Unscaled, FATROP's absolute dual
   tolerance on objectives of 1e3 to 1e5 asked for more than its Riccati factorisation delivers
@@ -18,6 +18,11 @@ Two decisions make FATROP converge where it used to stall (README, "Solver backe
 - **FATROP's acceptable exit is accepted**: ACCEPTABLE_TOL held for ACCEPTABLE_ITER consecutive
   iterations (IPOPT's own rule, with IPOPT's default tolerance class) ends a solve that has
   stopped improving, instead of running it into the cap.
+- **Redundant bounds are loosened** (NLP.redundant): a slack whose cost is smallest on its bound
+  (s_v >= 0, Relax-CBF's s_h <= 1) sits there with a zero multiplier wherever its constraint is
+  slack, and on such a degenerate bound FATROP stalled once its barrier parameter reached its
+  floor. While a bound is redundant (it never decides the optimum) FATROP gets it moved by
+  REDUNDANT_BOUND_SLACK, and its answer is put back on the declared bound.
 
 A FATROP solve is accepted only if its exit flag is one of ACCEPTED_EXITS, its decision is finite
 and every constraint holds to CONSTRAINT_CHECK_TOL. Otherwise the same problem is solved by the
@@ -29,6 +34,8 @@ a converged solve is accepted and its acceptable exits go to IPOPT.
 """
 
 from __future__ import annotations
+
+from collections.abc import Sequence
 
 import casadi as ca
 import numpy as np
@@ -50,6 +57,18 @@ GRADIENT_SCALE = 10.0
 #: consecutive iterations. 1e-4 / 5 measured best of 1e-3, 1e-4, 1e-5 and 3, 5, 10, 15.
 ACCEPTABLE_TOL = 1e-4
 ACCEPTABLE_ITER = 5
+#: While an NLP's bounds are redundant (NLP.redundant: s_v >= 0 always, Relax-CBF's s_h <= 1 while
+#: every obstacle's barrier at the measured state is positive) FATROP gets them moved outward by
+#: this. On such a bound, where the cost puts the slack whenever its constraint is slack, the
+#: multiplier is zero (strict complementarity fails) and FATROP stalled: once its barrier
+#: parameter reached its floor, each step needed Hessian regularisation of 1e1 to 1e2 and the
+#: dual infeasibility stayed near 3e-4 until the iteration cap, where IPOPT converges in 15
+#: iterations. Any move keeps the minimisers. Measured over the 84 PyBullet cells of the scenario
+#: table, FATROP's own failures (steps whose problem IPOPT then solved from the same guess) were
+#: 159 with the bounds; s_h's raised by 0.25 / 0.5 / 1 / without bound: 63 / 62 / 78 / 100 (an
+#: unbounded s_h wanders off where an infeasible iterate's B(k) < 0 rewards it); with s_v's
+#: lowered by 0.5 as well: 58.
+REDUNDANT_BOUND_SLACK = 0.5
 #: FATROP exits whose solution is used (if it also passes the constraint check).
 ACCEPTED_EXITS = frozenset({"Success", "StopAtAcceptablePoint"})
 
@@ -71,10 +90,17 @@ def fatrop_options(options: SolverOptions, equality: tuple[bool, ...]) -> dict[s
     }
 
 
-def scaled_solve_function(name: str, nlp: dict[str, ca.SX], options: dict[str, object]) -> ca.Function:
+def scaled_solve_function(
+    name: str,
+    nlp: dict[str, ca.SX],
+    options: dict[str, object],
+    loosened: Sequence[tuple[np.ndarray, ca.SX]] = (),
+) -> ca.Function:
     """(x0, p, lbx, ubx, lbg, ubg) -> (x, g): FATROP on sigma * f with
     sigma = min(1, GRADIENT_SCALE / max|grad f(x0)|). The bounds stay inputs, so that problems
-    that differ only in their bounds (a check's sampled drive limits) share one compiled solver."""
+    that differ only in their bounds (a check's sampled drive limits) share one compiled solver.
+    `loosened`: (signed mask over x, condition in p) pairs; while a condition is > 0, its masked
+    bounds move away from S by REDUNDANT_BOUND_SLACK (-1: lower bounds, +1: upper; NLP.redundant)."""
     x, p, f = nlp["x"], nlp["p"], nlp["f"]
     sigma = ca.SX.sym("sigma")
     scaled = {**nlp, "p": ca.vertcat(p, sigma), "f": sigma * f}
@@ -85,8 +111,16 @@ def scaled_solve_function(name: str, nlp: dict[str, ca.SX], options: dict[str, o
     bounds |= {k: ca.MX.sym(k, nlp["g"].numel()) for k in ("lbg", "ubg")}
     largest = ca.mmax(ca.fabs(gradient(guess, parameters)))
     scale = ca.fmin(1.0, GRADIENT_SCALE / ca.fmax(largest, 1e-300))
-    out = solver(x0=guess, p=ca.vertcat(parameters, scale), **bounds)
     inputs = {"x0": guess, "p": parameters, **bounds}
+    for i, (signs, condition) in enumerate(loosened):
+        holds = ca.Function(f"{name}_redundant_{i}", [p], [condition])(parameters) > 0
+        shift = ca.if_else(holds, ca.DM(REDUNDANT_BOUND_SLACK * signs), ca.DM.zeros(x.numel()))
+        bounds = {
+            **bounds,
+            "lbx": bounds["lbx"] + ca.fmin(shift, 0),
+            "ubx": bounds["ubx"] + ca.fmax(shift, 0),
+        }
+    out = solver(x0=guess, p=ca.vertcat(parameters, scale), **bounds)
     return ca.Function(name, list(inputs.values()), [out["x"], out["g"]], list(inputs), ["x", "g"])
 
 
@@ -108,8 +142,19 @@ class FatropSolver:
         # constraint check, only the finite ones: (indices, values) per side
         self._bounds = {k: ca.DM(v) for k, v in bounds.items()}
         self._finite = {k: (np.flatnonzero(np.isfinite(v)), v[np.isfinite(v)]) for k, v in bounds.items()}
+        # the redundant bounds, loosened while they are redundant: a solve may then end a hair
+        # beyond one (an approximate s_h = 1 + 1e-5); its answer is put back on the declared
+        # bound, which (the bound being redundant) only loosens the constraint rows it enters
+        loosened, redundant = [], np.zeros(lbx.size, dtype=bool)
+        for entry in nlp.redundant:
+            signs = np.zeros(lbx.size)
+            signs[list(entry.indices)] = -1.0 if entry.side == "lower" else 1.0
+            loosened.append((stagewise.to_stage_order(signs), entry.holds))
+            redundant |= loosened[-1][0] != 0
+        clipped = np.flatnonzero(redundant)
+        self._clip = (clipped, bounds["lbx"][clipped], bounds["ubx"][clipped])
         function = scaled_solve_function(
-            f"{nlp.name}_fatrop", stagewise.nlp, fatrop_options(options, stagewise.equality)
+            f"{nlp.name}_fatrop", stagewise.nlp, fatrop_options(options, stagewise.equality), loosened
         )
         library = compiled_library(function)
         self._function = function if library is None else ca.external(function.name(), str(library))
@@ -148,6 +193,8 @@ class FatropSolver:
             exit_flag, iterations = self._status.last() if self._status is not None else ("Success", -1)
             if exit_flag in ACCEPTED_EXITS:
                 x, g = out["x"].full().ravel(), out["g"].full().ravel()
+                clipped, lower, upper = self._clip
+                x[clipped] = np.clip(x[clipped], lower, upper)
                 reason = self._refused(x, g)
                 if not reason:
                     status = "Solve_Succeeded" if exit_flag == "Success" else "Solved_To_Acceptable_Level"

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Literal
 
 import casadi as ca
 import numpy as np
@@ -11,16 +12,34 @@ from controllers.backends.stagewise import StageIndices
 
 
 @dataclass(frozen=True)
+class RedundantBounds:
+    """Bounds on S (all lower or all upper) that are redundant while `holds`, a scalar expression
+    in p alone, is > 0: no local minimiser and no KKT point of the problem without them lies
+    beyond them, so dropping them changes neither. What they cost is degeneracy: a slack whose
+    cost is smallest on its bound (W1 s_v^2 at s_v = 0, W2 (s_h - 1)^2 at s_h = 1) sits on it with
+    a zero multiplier wherever its constraint is slack, where strict complementarity fails and
+    an interior-point method may stall (controllers.backends.fatrop).
+    """
+
+    indices: tuple[int, ...]  # into S
+    side: Literal["lower", "upper"]
+    holds: ca.SX  # scalar in p; the bounds are redundant while it is > 0 (a constant: always)
+
+
+@dataclass(frozen=True)
 class NLP:
     """One OCP as an NLP: min f(S; p) s.t. lbg <= g(S; p) <= ubg, lbx <= S <= ubx.
 
     `stages` says where x_k and u_k lie in S, for solvers that exploit the stage structure.
+    `redundant` names bounds a solver may loosen while a condition on p holds; the declared
+    bounds stay the problem (solutions are checked against them, and IPOPT keeps them).
     """
 
     name: str
     problem: dict[str, ca.SX]  # keys x, p, f, g
     bounds: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]  # lbx, ubx, lbg, ubg
     stages: StageIndices
+    redundant: tuple[RedundantBounds, ...] = ()
 
 
 @dataclass

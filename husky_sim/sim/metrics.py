@@ -160,7 +160,10 @@ class EpisodeMetrics:
     solve_budget_ms: float  # tau: a solve slower than this delivers its command late on a robot
     solves_over_budget: int  # solves that took longer than tau (wall clock)
     fallbacks: int
-    solver_fallbacks: int  # solves the structured solver failed and IPOPT answered instead
+    solver_fallbacks: int  # steps whose structured solver (FATROP) failed and handed IPOPT a problem
+    # of those, steps where IPOPT solved the step's first problem from the same guess: FATROP's own
+    # failures (in the others IPOPT failed too: the problem was infeasible from that guess)
+    solver_fallbacks_ipopt_solved: int
     recoveries: int  # failed solves solved again from a retry guess (controllers.recovery)
     recovered_by: str  # how often each retry guess succeeded, e.g. "reverse=2 straight=1"
     soft_constraint_steps: int  # steps solved only with the obstacle constraint's penalised slack
@@ -250,6 +253,14 @@ def summarise(
         solves_over_budget=int(np.sum(solve > 1000.0 * tau_s)),
         fallbacks=int(np.sum(col["fallback"] != "none")),
         solver_fallbacks=int(np.sum(col["solver_fallback"] != "")),
+        solver_fallbacks_ipopt_solved=int(
+            np.sum(
+                (col["solver_fallback"] != "")
+                & (col["recovered_by"] == "")
+                & (col["fallback"] == "none")
+                & ~col["soft_constraint"].astype(bool)
+            )
+        ),
         recoveries=int(np.sum(col["recovered_by"] != "")),
         recovered_by=" ".join(
             f"{name}={int(np.sum(col['recovered_by'] == name))}"

@@ -248,3 +248,67 @@ def test_dynamics_with_a_parameter_on_the_next_state_are_refused_not_crashed() -
     problem = {"x": w, "p": p, "f": ca.sumsqr(w), "g": p * x[1] - (x[0] + u)}
     with pytest.raises(NotStagewiseError, match="stage 0: found gap rows"):
         transcribe(problem, [0], [0], stages)
+
+
+#: Problems recorded in PyBullet closed loops (Relax-CBF, scenario files' settings) on which FATROP
+#: ran into its iteration cap while the slacks' bounds were in force: s_h(k) sits on s_h <= 1 with
+#: a zero multiplier wherever the obstacle constraint is slack, and FATROP's dual infeasibility
+#: stalled near 3e-4 once its barrier parameter reached its floor (IPOPT: 14 to 21 iterations).
+DEGENERATE_BOUND_PROBLEMS = {
+    "husky_point_stabilisation_N12_step110": ("husky_point_stabilisation", 12),
+    "husky_circle_tracking_N7_step240": ("husky_circle_tracking", 7),
+}
+
+
+def _holds(nlp: NLP, p: np.ndarray) -> dict[str, float]:
+    """Each redundant bound's condition at p, by side."""
+    return {e.side: float(ca.Function("holds", [nlp.problem["p"]], [e.holds])(p)) for e in nlp.redundant}
+
+
+@pytest.mark.parametrize("key", sorted(DEGENERATE_BOUND_PROBLEMS))
+def test_fatrop_converges_where_a_slack_sits_on_its_bound(key: str) -> None:
+    """With the redundant bounds loosened for FATROP (every B(0) > 0 here), FATROP answers
+    itself, with the first control of converged IPOPT and the slacks back within their bounds."""
+    scenario, horizon = DEGENERATE_BOUND_PROBLEMS[key]
+    config = load_scenario(scenario).with_overrides(horizon=horizon).controller_config("relax-cbf")
+    data = np.load(Path(__file__).parent / "data" / "fatrop_degenerate_bound.npz")
+    p, guess = data[f"{key}_p"], data[f"{key}_guess"]
+    nlp = paper_nlp(config)
+    assert _holds(nlp, p)["upper"] > 0
+    raw = FatropSolver(nlp, SolverOptions()).solve(p, guess)
+    assert raw.solver == "fatrop" and not raw.fallback_reason, raw.fallback_reason
+    converged = IpoptSolver(nlp, SolverOptions(tol=1e-10, acceptable_tol=1e-10, max_iter=3000)).solve(
+        p, guess
+    )
+    assert converged.success
+    layout = layout_for(config)
+    plan, reference = Plan.from_vector(raw.decision, layout), Plan.from_vector(converged.decision, layout)
+    assert np.max(np.abs(plan.controls[0] - reference.controls[0])) < 1e-4
+    assert np.all(plan.decay_slack <= 1.0) and np.all(plan.decay_slack >= 0.0)
+    assert np.all(plan.clf_slack >= 0.0)
+
+
+def test_the_slacks_bounds_are_declared_redundant_only_where_they_are() -> None:
+    """s_v >= 0 is always redundant; Relax-CBF's s_h <= 1 only while min over obstacles of B(0)
+    at the measured state is positive (then no feasible B(k) is negative)."""
+    config = NMPCConfig(safety="relax-cbf", horizon=4, obstacle_slots=2, robot_radius_m=0.3)
+    nlp = paper_nlp(config)
+    lbx, ubx = nlp.bounds[:2]
+    layout = layout_for(config)
+    n = layout.n_decision
+    sides = {e.side: e.indices for e in nlp.redundant}
+    assert sides == {"lower": tuple(range(n - 8, n - 4)), "upper": tuple(range(n - 4, n))}
+    assert np.all(lbx[list(sides["lower"])] == 0.0) and np.all(ubx[list(sides["upper"])] == 1.0)
+
+    def params(state: np.ndarray) -> np.ndarray:
+        centres = np.stack([np.tile([2.0, 0.0], (5, 1)), np.tile([0.0, 3.0], (5, 1))])
+        return OCPParameters(
+            state, np.zeros((5, 3)), np.zeros((4, 2)), centres, np.array([0.5, 0.2])
+        ).to_vector()
+
+    # B(0) of the first obstacle: 1.0^2 - 0.8^2 = 0.36; of the second: 3^2 - 0.5^2 = 8.75
+    assert _holds(nlp, params(np.array([1.0, 0.0, 0.0])))["upper"] == pytest.approx(0.36)
+    inside = _holds(nlp, params(np.array([1.5, 0.0, 0.0])))
+    assert inside["upper"] < 0 < inside["lower"]  # inside an obstacle's set s_h <= 1 stays
+    for variant in ("bt", "cbf"):
+        assert [e.side for e in paper_nlp(NMPCConfig(safety=variant, horizon=4)).redundant] == ["lower"]
