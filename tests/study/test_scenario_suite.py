@@ -6,7 +6,10 @@ Every cell asserts: its outcome is the one measured (so a change either way fail
 (physics clearance > 0) unless the table records the collision as a known failure of that
 controller (then the cell is a strict xfail: it fails loudly the day the collision goes away), and
 that the obstacle constraint was active at some step (a scenario that never activates it tests
-nothing and is rejected).
+nothing and is rejected). Seven mover cells end differently on different CPUs with the same code
+(floating point): they carry the outcome measured on the other machine too (`on_other_cpus`), and
+either measured outcome passes; a third fails, and a collision is an xfail only where one was
+measured.
 
 The table is the paper's controllers reproduced with the paper's solver, IPOPT (the reference
 backend), so every cell runs on it; the default backend, FATROP, ends at least 9 of these knife-edge
@@ -58,16 +61,29 @@ def test_table_covers_the_whole_matrix_and_nothing_else() -> None:
     assert set(TABLE) - matrix == set(), "expectations for cells the suite does not run"
 
 
+def _measured(entry: dict[str, object]) -> list[dict[str, object]]:
+    """The outcomes measured for a cell: its own, and the one on other CPUs where it differs."""
+    return [entry] + ([entry["on_other_cpus"]] if "on_other_cpus" in entry else [])
+
+
 def test_table_entries_are_well_formed() -> None:
     for cell, entry in TABLE.items():
-        assert entry["outcome"] in OUTCOMES, cell.label()
-        assert isinstance(entry["converged"], bool), cell.label()
-        assert entry["outcome"] != "collided" or entry.get("why"), f"{cell.label()}: a collision needs a why"
+        for measured in _measured(entry):
+            assert measured["outcome"] in OUTCOMES, cell.label()
+            assert isinstance(measured["converged"], bool), cell.label()
+            assert measured["outcome"] != "collided" or measured.get("why"), (
+                f"{cell.label()}: a collision needs a why"
+            )
+        if "on_other_cpus" in entry:
+            other = entry["on_other_cpus"]
+            assert (other["outcome"], other["converged"]) != (entry["outcome"], entry["converged"]), (
+                cell.label()
+            )
 
 
 def _param(cell: Cell, entry: dict[str, object]) -> object:
     marks = [pytest.mark.slow]
-    if entry["outcome"] == "collided":
+    if entry["outcome"] == "collided" and "on_other_cpus" not in entry:
         reason = f"known collision: {entry['why']}"
         marks.append(pytest.mark.xfail(strict=True, raises=AssertionError, reason=reason))
     return pytest.param(cell, entry, id=cell.label(), marks=marks)
@@ -82,11 +98,14 @@ def test_scenario_cell(cell: Cell, entry: dict[str, object]) -> None:
         f"outcome {m.outcome}, converged {m.converged}, "
         f"min clearance {m.min_clearance_m}, active steps {m.safety_active_steps}"
     )
+    known = [e for e in _measured(entry) if e["outcome"] == "collided"]
+    if m.collided and known and "on_other_cpus" in entry:
+        pytest.xfail(f"known collision on this CPU: {known[0]['why']} ({measured})")
     assert not m.collided and m.min_clearance_m is not None and m.min_clearance_m > 0.0, (
         f"collision ({measured})"
     )
-    if entry["outcome"] == "collided":
+    if entry["outcome"] == "collided" and "on_other_cpus" not in entry:
         return  # no collision this time: the strict xfail turns this pass into a loud failure
     assert m.safety_active_steps > 0, f"the obstacle constraint never activated ({measured})"
-    assert m.outcome == entry["outcome"], measured
-    assert m.converged == entry["converged"], measured
+    expected = [(e["outcome"], e["converged"]) for e in _measured(entry) if e["outcome"] != "collided"]
+    assert (m.outcome, m.converged) in expected, f"{measured}; measured: {expected}"
