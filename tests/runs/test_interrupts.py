@@ -20,10 +20,12 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import yaml
 
 from controllers import NMPCConfig, NMPCController, Obstacle, SetPoint
 from husky_sim import interrupts
 from husky_sim.runs.parallel import process_map
+from husky_sim.runs.scenario import resolve
 from husky_sim.scenario_file import scenario_yaml
 from husky_sim.sim.episode import EpisodeConfig, run_episode
 from husky_sim.sim.outcomes import Outcomes, is_stuck_window
@@ -46,8 +48,13 @@ def _run_cli(args: list[str]) -> subprocess.Popen:
 @pytest.mark.slow
 def test_signals_at_random_instants_end_the_run_as_interrupted(tmp_path: Path) -> None:
     """Seeded random instants: some in start-up (counted from launch), most in the closed loop
-    (counted from the first logged step, so a slow machine cannot turn them into start-up cases;
-    the 30 s tracking episode at N = 5 never stops early and runs 150 steps, several seconds)."""
+    (counted from the first logged step, so a slow machine cannot turn them into start-up cases).
+    The circle-tracking episode is stretched to 300 s at N = 5: it never stops early and runs 1500
+    steps, far longer than the 2 s the last signal may wait (the shipped 30 s episode ran out
+    within 1.7 s on a fast CPU)."""
+    scenario = yaml.safe_load(resolve("husky_circle_tracking").read_text()) | {"duration_s": 300.0}
+    long_run = tmp_path / "long_circle_tracking.yaml"
+    long_run.write_text(scenario_yaml(scenario))
     rng = random.Random(2026)
     cases = [(signal.SIGINT, "start-up", rng.uniform(0.05, 0.6)), (signal.SIGTERM, "start-up", 0.3)]
     cases += [(signal.SIGINT, "loop", rng.uniform(0.0, 2.0)) for _ in range(3)]
@@ -55,7 +62,7 @@ def test_signals_at_random_instants_end_the_run_as_interrupted(tmp_path: Path) -
     for i, (sig, phase, delay_s) in enumerate(cases):
         out = tmp_path / f"run_{i}"
         log = out / "log.csv"
-        proc = _run_cli(["run", "husky_circle_tracking", "--horizon", "5", "--out", str(out)])
+        proc = _run_cli(["run", str(long_run), "--horizon", "5", "--out", str(out)])
         if phase == "loop":
             deadline = time.monotonic() + 120.0
             while time.monotonic() < deadline and (not log.exists() or log.read_text().count("\n") < 2):
@@ -227,7 +234,7 @@ def test_solves_slower_than_tau_are_reported(tmp_path: Path) -> None:
         "robot": {"start": {"x_m": 0.0, "y_m": 0.0}, "radius_margin_m": 0.1},
         "reference": {"goal": {"x_m": 20.0, "y_m": 0.0}},
         "obstacles": [{"x_m": 3.0 + i, "y_m": 3.0 + (i % 3), "radius_m": 0.2} for i in range(30)],
-        "controller": {"horizon": 20},
+        "controller": {"horizon": 20, "solver": "ipopt"},  # the default FATROP can be faster than tau
     }
     path = tmp_path / "slow.yaml"
     path.write_text(scenario_yaml(scenario))

@@ -98,11 +98,29 @@ EXPECTED = [
 ]
 
 
+#: Claims whose verdict rests on a mover cell that ends differently on different CPUs with the same
+#: code (tests/study/scenario_expectations.yaml, `on_other_cpus`): the verdicts measured on the other
+#: machine. paper_dynamic_tracking relax-cbf N5 collides with the mover in the published report; on
+#: an Intel Xeon (2026-12-02; the code before and after 98e641f alike) it stops 0.022 m short of it
+#: on the default FATROP, so the claim's safety half holds, and with its earlier onset (1.6 s against
+#: BT's 1.7 s) and smoother inputs (RMS dv/dt 0.59 against 0.94 m/s^2, dw/dt 1.11 against 1.21
+#: rad/s^2) the claim is reproduced there.
+ON_OTHER_CPUS = {
+    "paper_dynamic_tracking, N = 5: Relax-CBF (gamma = 0.12) deviates earlier and is smoother than BT": (
+        "not reproduced",
+        "reproduced",
+    ),
+}
+
+
 @pytest.mark.slow
 def test_paper_report_verdicts_match_the_published_ones(tmp_path: Path) -> None:
     results = run_paper_report(tmp_path, jobs=2, progress=False)
     measured = [(r.claim, r.kinematic.verdict, r.physics.verdict) for r in results]
-    assert measured == EXPECTED
+    assert [c for c, _, _ in measured] == [c for c, _, _ in EXPECTED]
+    for (claim, kinematic, physics), (_, *expected) in zip(measured, EXPECTED, strict=True):
+        allowed = [tuple(expected), *([ON_OTHER_CPUS[claim]] if claim in ON_OTHER_CPUS else [])]
+        assert (kinematic, physics) in allowed, f"{claim}: {kinematic} / {physics}, measured: {allowed}"
     published = (Path(__file__).parents[2] / "docs" / "paper_claims.md").read_text().splitlines()
     for claim, kinematic, physics in EXPECTED:
         row = next(line for line in published if line.startswith(f"| {claim} |"))

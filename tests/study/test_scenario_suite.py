@@ -12,7 +12,7 @@ either measured outcome passes; a third fails, and a collision is an xfail only 
 measured.
 
 The table is the paper's controllers reproduced with the paper's solver, IPOPT (the reference
-backend), so every cell runs on it; the default backend, FATROP, ends at least 9 of these knife-edge
+backend), so every cell runs on it; the default backend, FATROP, ends 9 to 11 of these knife-edge
 cells differently (README, "The scenario suite").
 """
 
