@@ -15,11 +15,14 @@ from controllers.config import SolverOptions
 __all__ = ["NLP", "FatropSolver", "IpoptSolver", "RawSolution", "make_solver"]
 
 
-def make_solver(nlp: NLP, options: SolverOptions) -> FatropSolver | IpoptSolver:
+def make_solver(
+    nlp: NLP, options: SolverOptions, fallback_max_iter: int | None = None
+) -> FatropSolver | IpoptSolver:
     """The solver `options.backend` names for any OCP given as an NLP (`opti` is the paper
-    controller's own baseline, built from its configuration, not from an NLP)."""
+    controller's own baseline, built from its configuration, not from an NLP); `fallback_max_iter`
+    caps FATROP's IPOPT fallback (FatropSolver)."""
     if options.backend == "fatrop":
-        return FatropSolver(nlp, options)
+        return FatropSolver(nlp, options, fallback_max_iter)
     if options.backend == "ipopt":
         return IpoptSolver(nlp, options)
     raise ValueError(f"solver.backend: {options.backend!r} cannot solve {nlp.name}; use fatrop or ipopt")

@@ -36,6 +36,7 @@ a converged solve is accepted and its acceptable exits go to IPOPT.
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import replace
 
 import casadi as ca
 import numpy as np
@@ -129,7 +130,7 @@ class FatropSolver:
 
     name = "fatrop"
 
-    def __init__(self, nlp: NLP, options: SolverOptions) -> None:
+    def __init__(self, nlp: NLP, options: SolverOptions, fallback_max_iter: int | None = None) -> None:
         lbx, ubx, lbg, ubg = nlp.bounds
         self._stagewise = stagewise = transcribe(nlp.problem, lbg, ubg, nlp.stages)
         bounds = {
@@ -159,7 +160,10 @@ class FatropSolver:
         library = compiled_library(function)
         self._function = function if library is None else ca.external(function.name(), str(library))
         self._status = None if library is None else FatropStatus(library)
-        self._reference = IpoptSolver(nlp, options)
+        # fallback_max_iter caps the fallback IPOPT (default: options.max_iter), for a caller whose
+        # own next step after a failure is cheaper than IPOPT's full verdict (husky-cbf's hard problem)
+        fallback = options if fallback_max_iter is None else replace(options, max_iter=fallback_max_iter)
+        self._reference = IpoptSolver(nlp, fallback)
 
     def reset(self) -> None:
         """Nothing is carried between solves but the guess."""
