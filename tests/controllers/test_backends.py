@@ -312,3 +312,21 @@ def test_the_slacks_bounds_are_declared_redundant_only_where_they_are() -> None:
     assert inside["upper"] < 0 < inside["lower"]  # inside an obstacle's set s_h <= 1 stays
     for variant in ("bt", "cbf"):
         assert [e.side for e in paper_nlp(NMPCConfig(safety=variant, horizon=4)).redundant] == ["lower"]
+
+
+def test_fatrop_fallback_can_be_capped() -> None:
+    """A capped IPOPT fallback (husky-cbf's hard problem: its penalised re-solve follows) stops at
+    its cap; uncapped, the same fallback converges."""
+    config, p, guess = _one_problem()
+
+    def fails(**_: object) -> None:
+        raise RuntimeError("Evaluation failed")
+
+    answers = {}
+    for cap in (None, 2):
+        solver = FatropSolver(paper_nlp(config), SolverOptions(), fallback_max_iter=cap)
+        solver._function = fails
+        answers[cap] = solver.solve(p, guess)
+    assert answers[None].success and answers[None].iterations > 2
+    assert not answers[2].success and answers[2].iterations == 2
+    assert answers[2].fallback_reason == "fatrop: solver error"
