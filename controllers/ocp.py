@@ -304,8 +304,14 @@ def redundant_bounds(config: NMPCConfig, problem: SXProblem) -> tuple[RedundantB
       (1 - gamma) B(k) <= 0. Inside an obstacle's set the bound matters (controllers.constraints).
     """
     layout = problem.layout
-    n, first_clf = layout.horizon, STATE_DIM * (layout.horizon + 1) + CONTROL_DIM * layout.horizon
-    bounds = [RedundantBounds(tuple(range(first_clf, first_clf + n)), "lower", ca.SX(1.0))]
+    n = layout.horizon
+
+    def entries(clf_slack: np.ndarray, decay_slack: np.ndarray) -> tuple[int, ...]:
+        """Where the marked slacks lie in S (read off the layout, as decision_bounds does)."""
+        marked = Plan(np.zeros((n + 1, STATE_DIM)), np.zeros((n, CONTROL_DIM)), clf_slack, decay_slack)
+        return tuple(int(i) for i in np.flatnonzero(marked.to_vector(layout)))
+
+    bounds = [RedundantBounds(entries(np.ones(n), np.zeros(n)), "lower", ca.SX(1.0))]
     if layout.has_decay_slack:
         par = split_parameters(problem.parameters, layout)
         position = par["feedback"][:2]
@@ -314,5 +320,5 @@ def redundant_bounds(config: NMPCConfig, problem: SXProblem) -> tuple[RedundantB
             for centre, radius in zip(par["centres"], par["radii"], strict=True)
         ]
         holds = ca.mmin(ca.vertcat(*barriers)) if barriers else ca.SX(1.0)
-        bounds.append(RedundantBounds(tuple(range(first_clf + n, first_clf + 2 * n)), "upper", holds))
+        bounds.append(RedundantBounds(entries(np.zeros(n), np.ones(n)), "upper", holds))
     return tuple(bounds)

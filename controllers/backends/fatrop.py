@@ -150,8 +150,9 @@ class FatropSolver:
         for entry in nlp.redundant:
             signs = np.zeros(lbx.size)
             signs[list(entry.indices)] = -1.0 if entry.side == "lower" else 1.0
-            loosened.append((stagewise.to_stage_order(signs), entry.holds))
-            redundant |= loosened[-1][0] != 0
+            signs = stagewise.to_stage_order(signs)
+            loosened.append((signs, entry.holds))
+            redundant |= signs != 0
         clipped = np.flatnonzero(redundant)
         self._clip = (clipped, bounds["lbx"][clipped], bounds["ubx"][clipped])
         function = scaled_solve_function(
