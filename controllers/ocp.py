@@ -119,11 +119,14 @@ class OCPParameters:
     obstacle_radii: np.ndarray  # (slots,)
 
     def to_vector(self) -> np.ndarray:
-        per_slot = [
-            np.concatenate([c.T.ravel(), [r]])
-            for c, r in zip(self.obstacle_centres, self.obstacle_radii, strict=True)
-        ]
-        return np.concatenate([self.feedback, self.ref_states.ravel(), self.ref_controls.ravel(), *per_slot])
+        slots, points = len(self.obstacle_radii), len(self.ref_states)
+        centres = np.reshape(self.obstacle_centres, (slots, points, 2)).transpose(0, 2, 1)
+        per_slot = np.hstack(  # each slot: its x's, its y's, its radius
+            [centres.reshape(slots, 2 * points), np.reshape(self.obstacle_radii, (slots, 1))]
+        )
+        return np.concatenate(
+            [self.feedback, self.ref_states.ravel(), self.ref_controls.ravel(), per_slot.ravel()]
+        )
 
 
 @dataclass

@@ -52,27 +52,26 @@ class SkidSteerDrive:
         self.config = config
         self.wheel_radius_m = wheel_radius_m
         self.effective_separation_m = track_width_m * config.wheel_separation_multiplier
-        self._applied = np.zeros(2)
+        self._applied = (0.0, 0.0)
 
     def reset(self) -> None:
-        self._applied = np.zeros(2)
+        self._applied = (0.0, 0.0)
 
     @property
     def applied(self) -> np.ndarray:
         """The last limited command [v, omega] actually sent to the wheels."""
-        return self._applied.copy()
+        return np.array(self._applied)
 
     def limit(self, command: np.ndarray, dt_s: float) -> np.ndarray:
-        """Clip to the velocity limits, then move at most a_max dt towards it (one update)."""
+        """Clip to the velocity limits, then move at most a_max dt towards it (one update; plain
+        floats, as it runs every physics step)."""
         cfg = self.config
         v = min(max(float(command[0]), -cfg.max_linear_mps), cfg.max_linear_mps)
         w = min(max(float(command[1]), -cfg.max_angular_radps), cfg.max_angular_radps)
         dv_max, dw_max = cfg.max_linear_accel_mps2 * dt_s, cfg.max_angular_accel_radps2 * dt_s
         v0, w0 = self._applied
-        self._applied = np.array(
-            [v0 + min(max(v - v0, -dv_max), dv_max), w0 + min(max(w - w0, -dw_max), dw_max)]
-        )
-        return self._applied.copy()
+        self._applied = (v0 + min(max(v - v0, -dv_max), dv_max), w0 + min(max(w - w0, -dw_max), dw_max))
+        return np.array(self._applied)
 
     def wheel_speeds(self, command: np.ndarray) -> tuple[float, float]:
         """Left and right wheel angular speeds (rad/s) for a body command [v, omega]."""

@@ -97,18 +97,15 @@ class HuskyEnvironment:
         world, robot, drive = self.world, self.robot, self.drive
         clearance = math.inf
         applied = drive.applied
+        checked = bool(world.obstacle_ids or world.wall_ids)
         for _ in range(self.substeps):
             applied = drive.limit(command, world.dt_s)
             robot.command_wheels(*drive.wheel_speeds(applied), self.config.drive.wheel_torque_limit_nm)
             world.step()
             if on_physics_step is not None:
                 on_physics_step(applied)
-            if world.obstacle_ids or world.wall_ids:
-                xy = robot.pose()[:2]
-                distances = np.concatenate(
-                    [self.monitor.distances(xy, world.obstacle_centres()), self.monitor.wall_distances(xy)]
-                )
-                clearance = min(clearance, float(np.min(distances)))
+            if checked:
+                clearance = self.monitor.smallest(robot.position_xy(), world.obstacle_centres(), clearance)
         return applied, clearance
 
     def close(self) -> None:

@@ -11,6 +11,7 @@ joint at zero.
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -232,6 +233,14 @@ def load_geometry(urdf_path: Path | None = None) -> RobotGeometry:
             collision shape is a mesh.
     """
     path = Path(urdf_path) if urdf_path is not None else DEFAULT_URDF
+    stamp = path.stat()
+    return _measured(path, stamp.st_mtime_ns, stamp.st_size)
+
+
+@functools.lru_cache(maxsize=16)
+def _measured(path: Path, mtime_ns: int, size: int) -> RobotGeometry:
+    """load_geometry's work, once per file version (every episode builds a robot; parsing the
+    URDF took longer than a second of simulated driving's Python)."""
     urdf = yourdfpy.URDF.load(str(path), build_scene_graph=True, load_meshes=False)
     base_link = urdf.base_link
 

@@ -78,10 +78,16 @@ class HuskyRobot:
             base_mass = p.getDynamicsInfo(self.body, -1, physicsClientId=client)[0]
             p.changeDynamics(self.body, -1, mass=base_mass + payload_kg, physicsClientId=client)
         self._inertial_inv = p.invertTransform(*p.getDynamicsInfo(self.body, -1, physicsClientId=client)[3:5])
+        self._wheel_command: tuple[float, float, float] | None = None
         self.command_wheels(0.0, 0.0, 1.0)
 
     def command_wheels(self, left_radps: float, right_radps: float, torque_limit_nm: float) -> None:
-        """Velocity-control targets for the left and right wheel pairs (rad/s)."""
+        """Velocity-control targets for the left and right wheel pairs (rad/s). The engine keeps a
+        motor's target until it is set again, so an unchanged command is not sent again."""
+        command = (left_radps, right_radps, torque_limit_nm)
+        if command == self._wheel_command:
+            return
+        self._wheel_command = command
         targets = [left_radps] * len(self.left_joints) + [right_radps] * len(self.right_joints)
         p.setJointMotorControlArray(
             self.body,
@@ -98,6 +104,12 @@ class HuskyRobot:
         pos, orn = p.multiplyTransforms(com_pos, com_orn, *self._inertial_inv)
         yaw = p.getEulerFromQuaternion(orn)[2]
         return np.array([pos[0], pos[1], yaw])
+
+    def position_xy(self) -> tuple[float, float]:
+        """base_link's x and y (m), as in `pose` (read every physics step by the clearance check)."""
+        com_pos, com_orn = p.getBasePositionAndOrientation(self.body, physicsClientId=self.client)
+        pos, _ = p.multiplyTransforms(com_pos, com_orn, *self._inertial_inv)
+        return pos[0], pos[1]
 
     def base_com_pose(self) -> tuple[tuple[float, ...], tuple[float, ...]]:
         """PyBullet's base frame (centre of mass): position (m) and quaternion (x, y, z, w)."""

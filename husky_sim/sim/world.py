@@ -11,6 +11,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -47,21 +48,34 @@ class ObstacleSpec:
     def moving(self) -> bool:
         return bool(self.waypoints) or self.vx_mps != 0.0 or self.vy_mps != 0.0
 
-    def state_at(self, t_s: float) -> tuple[np.ndarray, np.ndarray]:
-        """Centre (m) and velocity (m/s) at time t_s."""
-        start = np.array([self.x_m, self.y_m])
-        if not self.waypoints:
-            vel = np.array([self.vx_mps, self.vy_mps])
-            return start + vel * t_s, vel
-        travelled = self.speed_mps * t_s
-        points = [start, *(np.asarray(w, dtype=float) for w in self.waypoints)]
+    @cached_property
+    def _legs(self) -> tuple[tuple[tuple[float, float], tuple[float, float], float], ...]:
+        """The waypoint path's legs as (start (m), unit direction, length m), worked out once."""
+        points = [np.array([self.x_m, self.y_m]), *(np.asarray(w, dtype=float) for w in self.waypoints)]
+        legs = []
         for a, b in zip(points[:-1], points[1:], strict=True):
             length = float(np.linalg.norm(b - a))
+            unit = (b - a) / length if length > 0 else np.zeros(2)
+            legs.append(((float(a[0]), float(a[1])), (float(unit[0]), float(unit[1])), length))
+        return tuple(legs)
+
+    def motion_at(self, t_s: float) -> tuple[float, float, float, float]:
+        """Centre (m) and velocity (m/s) at time t_s as plain floats (x, y, vx, vy): the one
+        place motion is worked out, called every physics step for each mover."""
+        if not self.waypoints:
+            return self.x_m + self.vx_mps * t_s, self.y_m + self.vy_mps * t_s, self.vx_mps, self.vy_mps
+        travelled = self.speed_mps * t_s
+        for (ax, ay), (ux, uy), length in self._legs:
             if travelled <= length and length > 0:
-                direction = (b - a) / length
-                return a + direction * travelled, direction * self.speed_mps
+                return ax + ux * travelled, ay + uy * travelled, ux * self.speed_mps, uy * self.speed_mps
             travelled -= length
-        return points[-1], np.zeros(2)
+        x, y = self.waypoints[-1]
+        return float(x), float(y), 0.0, 0.0
+
+    def state_at(self, t_s: float) -> tuple[np.ndarray, np.ndarray]:
+        """Centre (m) and velocity (m/s) at time t_s."""
+        x, y, vx, vy = self.motion_at(t_s)
+        return np.array([x, y]), np.array([vx, vy])
 
     def circle_at(self, t_s: float) -> Obstacle:
         """The controller's view of this obstacle at time t_s: its circle and its velocity then."""
@@ -109,6 +123,7 @@ class World:
         self.obstacle_ids: list[int] = [self._add_cylinder(o) for o in config.obstacles]
         self._static_centres = np.array([[o.x_m, o.y_m] for o in config.obstacles]).reshape(-1, 2)
         self._moving = [i for i, o in enumerate(config.obstacles) if o.moving]
+        self._centres = self.obstacle_centres(0.0)
         self.wall_ids: list[int] = self._add_arena(config.arena_half_size_m)
 
     def _add_cylinder(self, spec: ObstacleSpec) -> int:
@@ -144,15 +159,14 @@ class World:
         return ids
 
     def _place_obstacles(self, t_s: float) -> None:
-        for spec, body in zip(self.config.obstacles, self.obstacle_ids, strict=True):
-            if spec.moving:
-                centre, _ = spec.state_at(t_s)
-                p.resetBasePositionAndOrientation(
-                    body,
-                    [centre[0], centre[1], 0.5 * spec.height_m],
-                    [0, 0, 0, 1],
-                    physicsClientId=self.client,
-                )
+        """Move the kinematic obstacles to their pose at t_s and remember their centres."""
+        for i in self._moving:
+            spec = self.config.obstacles[i]
+            x, y, _, _ = spec.motion_at(t_s)
+            self._centres[i] = x, y
+            p.resetBasePositionAndOrientation(
+                self.obstacle_ids[i], [x, y, 0.5 * spec.height_m], [0, 0, 0, 1], physicsClientId=self.client
+            )
 
     def step(self) -> None:
         """Advance one physics step, moving kinematic obstacles to their pose at the new time."""
@@ -161,12 +175,13 @@ class World:
         self.time_s += self.dt_s
 
     def obstacle_centres(self, t_s: float | None = None) -> np.ndarray:
-        """True obstacle centres (m), shape (n, 2), at time t_s (default: now); the hot path of
-        per-physics-step collision checks, so static centres are cached."""
-        t = self.time_s if t_s is None else t_s
+        """True obstacle centres (m), shape (n, 2), at time t_s (default: now, as placed by the
+        last step: the hot path of per-physics-step collision checks)."""
+        if t_s is None:
+            return self._centres.copy()
         centres = self._static_centres.copy()
         for i in self._moving:
-            centres[i] = self.config.obstacles[i].state_at(t)[0]
+            centres[i] = self.config.obstacles[i].state_at(t_s)[0]
         return centres
 
     def obstacle_states(self, t_s: float | None = None) -> list[Obstacle]:

@@ -115,6 +115,20 @@ def test_fatrop_answers_like_ipopt() -> None:
     assert np.max(np.abs(raw.decision - reference.decision)) < 1e-4
 
 
+class StandIn:
+    """In place of the compiled FATROP function (called as `call([x0, p, bounds...])`): raises
+    `error`, or returns `answer` ([x, g] in stage order) whatever it is asked."""
+
+    def __init__(self, error: Exception | None = None, answer: list[ca.DM] | None = None) -> None:
+        self.error, self.answer = error, answer
+
+    def call(self, _args: list[object]) -> list[ca.DM]:
+        if self.error is not None:
+            raise self.error
+        assert self.answer is not None
+        return self.answer
+
+
 def test_fatrop_failures_fall_back_to_ipopt_and_say_why() -> None:
     """A real FATROP exit that is not accepted (its iteration cap, read through the status shim),
     a solver error and an answer that violates the constraints are all handed to IPOPT, which
@@ -127,11 +141,7 @@ def test_fatrop_failures_fall_back_to_ipopt_and_say_why() -> None:
     assert capped.fallback_reason.startswith("fatrop: MaxIterExceeded after ")
 
     solver = FatropSolver(paper_nlp(config), SolverOptions())
-
-    def fails(**_: object) -> None:
-        raise RuntimeError("Evaluation failed")
-
-    solver._function = fails
+    solver._function = StandIn(error=RuntimeError("Evaluation failed"))
     raw = solver.solve(p, guess)
     assert raw.success and raw.solver == "ipopt" and raw.fallback_reason == "fatrop: solver error"
     assert np.max(np.abs(raw.decision - reference.decision)) < 1e-6
@@ -140,7 +150,7 @@ def test_fatrop_failures_fall_back_to_ipopt_and_say_why() -> None:
     stagewise = solver._stagewise
     infeasible = stagewise.to_stage_order(guess)
     g = ca.Function("g", [stagewise.nlp["x"], stagewise.nlp["p"]], [stagewise.nlp["g"]])
-    solver._function = lambda **_: {"x": ca.DM(infeasible), "g": g(infeasible, p)}
+    solver._function = StandIn(answer=[ca.DM(infeasible), g(infeasible, p)])
     raw = solver.solve(p, guess)
     assert raw.solver == "ipopt" and raw.fallback_reason.startswith("fatrop: constraint check")
 
@@ -319,13 +329,10 @@ def test_fatrop_fallback_can_be_capped() -> None:
     its cap; uncapped, the same fallback converges."""
     config, p, guess = _one_problem()
 
-    def fails(**_: object) -> None:
-        raise RuntimeError("Evaluation failed")
-
     answers = {}
     for cap in (None, 2):
         solver = FatropSolver(paper_nlp(config), SolverOptions(), fallback_max_iter=cap)
-        solver._function = fails
+        solver._function = StandIn(error=RuntimeError("Evaluation failed"))
         answers[cap] = solver.solve(p, guess)
     assert answers[None].success and answers[None].iterations > 2
     assert not answers[2].success and answers[2].iterations == 2

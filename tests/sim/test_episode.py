@@ -44,8 +44,8 @@ def test_clearance_monitor_measures_the_body() -> None:
             world.client, robot.body, world.obstacle_ids, [0.3], 0.59, exact_within_m=5.0
         )
         filtered = ClearanceMonitor(world.client, robot.body, world.obstacle_ids, [0.3], 0.59)
-        d_exact = exact.distances(robot.pose()[:2], np.array([[2.0, 0.0]]))[0]
-        d_filtered = filtered.distances(robot.pose()[:2], np.array([[2.0, 0.0]]))[0]
+        d_exact = exact.smallest(robot.position_xy(), np.array([[2.0, 0.0]]))
+        d_filtered = filtered.smallest(robot.position_xy(), np.array([[2.0, 0.0]]))
     assert d_exact == pytest.approx(2.0 - 0.3 - 0.4937, abs=5e-3)
     assert d_filtered <= d_exact and filtered.queries == 0  # far: bound only, never above truth
 
