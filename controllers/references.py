@@ -25,6 +25,11 @@ class Reference(ABC):
         """Reference state [x, y, theta] at time t_s (s)."""
         return self.sample(t_s, 1.0, 1)[0][0]
 
+    def states_at(self, times_s: np.ndarray) -> np.ndarray:
+        """Reference states [x, y, theta], shape (len(times_s), 3), each exactly `state_at`'s, the
+        first state of `sample` (a whole path at once: a trace or a recording draws it)."""
+        return np.array([self.state_at(float(t)) for t in np.asarray(times_s, dtype=float)]).reshape(-1, 3)
+
 
 @dataclass(frozen=True)
 class SetPoint(Reference):
@@ -53,6 +58,15 @@ class Trajectory(Reference):
     @abstractmethod
     def acceleration(self, t: np.ndarray) -> np.ndarray:
         """d2p/dt2, shape (len(t), 2), in m/s^2."""
+
+    def state_at(self, t_s: float) -> np.ndarray:
+        return self.states_at(np.array([t_s]))[0]
+
+    def states_at(self, times_s: np.ndarray) -> np.ndarray:
+        # the heading is that of sample()'s first state, which unwrapping leaves as atan2 gives it
+        times = np.asarray(times_s, dtype=float).reshape(-1)
+        vel = self.velocity(times)
+        return np.column_stack([self.position(times), np.arctan2(vel[:, 1], vel[:, 0])])
 
     def sample(self, t_s: float, tau_s: float, horizon: int) -> tuple[np.ndarray, np.ndarray]:
         times = t_s + tau_s * np.arange(horizon + 1)

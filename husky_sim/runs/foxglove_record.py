@@ -135,7 +135,7 @@ class FoxgloveRecorder:
         self._closed = False
         if not isinstance(reference, SetPoint):  # the whole reference path, once
             t = np.arange(0.0, duration_s + 1e-9, min(tau_s, 0.05))
-            path = np.array([reference.state_at(ti) for ti in t])
+            path = reference.states_at(t)
             self._scene.log(
                 fm.SceneUpdate(
                     entities=[self._entity(0.0, "reference-path", lines=[_line(path, _REFERENCE, 0.03)])]

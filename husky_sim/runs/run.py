@@ -171,7 +171,7 @@ def run_scenario_kinematic(
         outcomes,
     )
     is_setpoint = isinstance(reference, SetPoint)
-    refs = np.array([reference.state_at(t) for t in ep.times_s])
+    refs = reference.states_at(ep.times_s)
     errors = np.hypot(*(ep.states[:, :2] - refs[:, :2]).T)
     rmse = None if is_setpoint else tracking_rmse(errors, ep.times_s, outcomes.tracking_settle_s)
     collided = ep.outcome == "collided"

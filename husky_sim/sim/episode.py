@@ -197,7 +197,7 @@ class _TraceRecorder:
             obstacle_height_m=np.array([o.height_m for o in specs]),
             control_t_s=np.array([float(r["t_s"]) for r in rows]),
             predicted_states=np.array(plans) if plans else np.zeros((0, 1, 3)),
-            reference_path=np.array([reference.state_at(t) for t in ref_t]),
+            reference_path=reference.states_at(ref_t),
             goal=goal,
             robot_radius_m=float("nan") if robot_radius_m is None else float(robot_radius_m),
             footprint_radius_m=float(footprint_radius_m),

@@ -5,6 +5,8 @@ import math
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from controllers import CircleTrajectory, NMPCConfig, NMPCController, Obstacle, SetPoint
 from controllers.config import SOLVER_BACKENDS, SolverOptions
@@ -139,6 +141,27 @@ def test_circle_reference_feed_forward() -> None:
     )
     assert np.allclose(wrap_angle(states[:, 2] - (0.16 * t + math.pi / 2)), 0.0, atol=1e-12)
     assert np.allclose(controls[:, 0], 2.5 * 0.16) and np.allclose(controls[:, 1], 0.16)
+
+
+@given(
+    radius=st.floats(0.1, 20.0),
+    rate=st.floats(-2.0, 2.0).filter(lambda w: abs(w) > 1e-3),
+    centre=st.tuples(st.floats(-50.0, 50.0), st.floats(-50.0, 50.0)),
+    phase=st.floats(-math.pi, math.pi),
+    times=st.lists(st.floats(0.0, 3600.0), min_size=1, max_size=40),
+)
+@settings(max_examples=60, deadline=None)
+def test_a_path_sampled_at_once_is_every_sample_first_state(
+    radius: float, rate: float, centre: tuple[float, float], phase: float, times: list[float]
+) -> None:
+    """`states_at` (traces and recordings draw a whole path with it) gives, bit for bit, the state
+    a controller's `sample` starts from, at every time."""
+    circle = CircleTrajectory(radius, rate, *centre, phase)
+    one_by_one = np.array([circle.sample(t, 0.1, 3)[0][0] for t in times])
+    assert np.array_equal(circle.states_at(np.array(times)), one_by_one)
+    assert all(np.array_equal(circle.state_at(t), row) for t, row in zip(times, one_by_one, strict=True))
+    goal = SetPoint(1.0, -2.0, 0.5)
+    assert np.array_equal(goal.states_at(np.array(times)), np.tile([1.0, -2.0, 0.5], (len(times), 1)))
 
 
 def test_heading_is_wrapped_in_cost_and_clf() -> None:
