@@ -48,14 +48,19 @@ def _in_worker(fn: Callable[[T], R], item: T) -> R:
 
 
 def _stop_workers(pool: ProcessPoolExecutor) -> None:
-    """Cancel what has not started and terminate the workers (Python 3.11 has no public call;
-    `shutdown` forgets the processes, so they are taken first)."""
+    """Cancel what has not started, terminate the workers and let the pool's manager thread finish
+    (Python 3.11 has no public call; `shutdown` forgets the processes, so they are taken first)."""
     processes = list((getattr(pool, "_processes", None) or {}).values())
+    manager = getattr(pool, "_executor_manager_thread", None)
     pool.shutdown(wait=False, cancel_futures=True)
     for process in processes:
         process.terminate()
     for process in processes:
         process.join(timeout=1.0)
+    # the pool's manager thread drops its queues once the workers are gone, and their semaphores
+    # are unlinked as it does; a quick exit in the middle of that leaks one (resource_tracker warns)
+    if manager is not None:
+        manager.join(timeout=0.5)
 
 
 def process_map(
