@@ -241,7 +241,9 @@ class HuskyCBFController:
         )
         centres, radii = self._obstacles(pose, obstacles)
         lookahead = cfg.terminal_lookahead_m * (-1.0 if self._approach.docking else 1.0)
-        caps = self._speed_caps(z0, now, stationary)
+        # no approach cap while stepping out of a mover's way: the cap buys docking time for the
+        # yaw lag, and a robot that can reverse at only approach_speed_mps is caught by a mover
+        caps = self._speed_caps(z0, now, stationary and not self._evasion.active)
         p = pack_parameters(z0, ref_states, ref_controls, centres, radii, caps, lookahead)
         guess = self._warm_guess(z0)
         hard, soft = self._hard_problem.layout, self._soft_problem.layout

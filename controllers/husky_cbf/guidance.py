@@ -261,6 +261,11 @@ class MoverEvasion:
     def reset(self) -> None:
         self.side = 0.0
 
+    @property
+    def active(self) -> bool:
+        """Whether the last `waypoint` call stepped aside (a mover on a collision course)."""
+        return bool(self.side)
+
     def waypoint(self, pose: np.ndarray, speed_mps: float, obstacles: Sequence[Obstacle]) -> Waypoint | None:
         cfg = self.config
         robot_xy = np.asarray(pose[:2], dtype=float)
