@@ -35,6 +35,15 @@ pytestmark = pytest.mark.physics  # PyBullet or closed loops throughout (`make t
 ROOT = Path(__file__).resolve().parents[2]
 
 
+def _default_signals() -> None:
+    """In the child, before exec: SIGINT and SIGTERM at their defaults, as a terminal starts a
+    program. A test run started in the background of a non-interactive shell (`make test &`)
+    inherits SIGINT ignored, and so would its children: a signal sent in the first tenth of a
+    second, before husky-sim installs its handlers, was then dropped and the run went on (exit 0)."""
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, signal.SIG_DFL)
+
+
 def _run_cli(args: list[str]) -> subprocess.Popen:
     return subprocess.Popen(
         [sys.executable, "-m", "husky_sim.cli", *args],
@@ -42,6 +51,7 @@ def _run_cli(args: list[str]) -> subprocess.Popen:
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
+        preexec_fn=_default_signals,
     )
 
 
