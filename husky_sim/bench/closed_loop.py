@@ -13,13 +13,12 @@ import numpy as np
 from controllers import NMPCConfig, NMPCController, SetPoint, SolverOptions
 from controllers.config import SolverBackend
 from husky_sim.runs.paper_problems import CLUTTERED_POINT_STABILISATION
-from husky_sim.sim.collision import ClearanceMonitor
-from husky_sim.sim.drive import DriveConfig, SkidSteerDrive
+from husky_sim.sim.drive import DriveConfig
+from husky_sim.sim.environment import HuskyEnvironment
 from husky_sim.sim.episode import EpisodeConfig, run_episode
 from husky_sim.sim.open_loop import simulate_commands
 from husky_sim.sim.outcomes import Outcomes
-from husky_sim.sim.robot import HuskyRobot
-from husky_sim.sim.world import ObstacleSpec, World, WorldConfig, obstacle_specs_from
+from husky_sim.sim.world import ObstacleSpec, WorldConfig, obstacle_specs_from
 
 #: The kinematic benchmark's seven obstacles (two moving) plus one beyond the goal.
 BENCH_OBSTACLES = (
@@ -153,17 +152,9 @@ def run_sim_bench(
 
     walls = []
     for check in (False, True):
-        with World(WorldConfig(obstacles=BENCH_OBSTACLES)) as world:
-            robot = HuskyRobot(world.client, start)
-            drive = SkidSteerDrive(DriveConfig(), robot.geometry.wheel_radius_m, robot.geometry.track_width_m)
-            monitor = ClearanceMonitor(
-                world.client,
-                robot.body,
-                world.obstacle_ids,
-                [o.radius_m for o in BENCH_OBSTACLES],
-                robot.geometry.footprint_radius_m + 0.02,
-            )
-            per_period = round(world.config.physics_hz * 0.1)  # the episode's tau
+        with HuskyEnvironment(config) as env:  # the episode's robot, drive and clearance check
+            world, robot, drive, monitor = env.world, env.robot, env.drive, env.monitor
+            per_period = env.substeps
             smallest = math.inf
             t0 = time.perf_counter()
             for k in range(stepping_steps):

@@ -7,10 +7,10 @@ import numpy as np
 import pytest
 
 from husky_sim.sim.bullet import pybullet as p
-from husky_sim.sim.collision import ClearanceMonitor
-from husky_sim.sim.drive import DriveConfig, SkidSteerDrive
+from husky_sim.sim.environment import HuskyEnvironment
+from husky_sim.sim.episode import EpisodeConfig
 from husky_sim.sim.robot import HuskyRobot
-from husky_sim.sim.world import ObstacleSpec, World, WorldConfig
+from husky_sim.sim.world import ObstacleSpec, WorldConfig
 
 pytestmark = pytest.mark.physics
 
@@ -22,7 +22,6 @@ OBSTACLES = (
     ObstacleSpec(-1.1, -0.9, 0.3),
     ObstacleSpec(1.6, -1.4, 0.2, vx_mps=-0.3, vy_mps=0.25),
 )
-PERIOD = 24  # physics steps per control period (tau = 0.1 s at 240 Hz)
 
 
 def engine_minimum(robot: HuskyRobot, bodies: list[int], client: int) -> float:
@@ -32,24 +31,16 @@ def engine_minimum(robot: HuskyRobot, bodies: list[int], client: int) -> float:
 
 
 def test_smallest_equals_the_engines_minimum_over_each_period() -> None:
-    with World(WorldConfig(obstacles=OBSTACLES, arena_half_size_m=2.2)) as world:
-        robot = HuskyRobot(world.client, (0.0, 0.0, 0.3))
-        drive = SkidSteerDrive(DriveConfig(), robot.geometry.wheel_radius_m, robot.geometry.track_width_m)
-        walls = [(b, n, d) for b, (n, d) in zip(world.wall_ids, world.wall_planes, strict=True)]
-        monitor = ClearanceMonitor(
-            world.client,
-            robot.body,
-            world.obstacle_ids,
-            [o.radius_m for o in OBSTACLES],
-            robot.geometry.footprint_radius_m + 0.02,
-            walls=walls,
-        )
+    world_config = WorldConfig(obstacles=OBSTACLES, arena_half_size_m=2.2)
+    config = EpisodeConfig(start=(0.0, 0.0, 0.3), tau_s=0.1, world=world_config)
+    with HuskyEnvironment(config) as env:  # the episode's robot, drive and clearance check
+        world, robot, drive, monitor = env.world, env.robot, env.drive, env.monitor
         bodies = world.obstacle_ids + world.wall_ids
         checked, contacts, full_queries = 0, 0, 0
         for period in range(60):
             command = np.array([0.6, 1.2 if period < 35 else 0.0])  # turn among them, then push
             ours, theirs = math.inf, math.inf
-            for _ in range(PERIOD):
+            for _ in range(env.substeps):  # one control period
                 robot.command_wheels(*drive.wheel_speeds(drive.limit(command, world.dt_s)), 40.0)
                 world.step()
                 ours = monitor.smallest(robot.position_xy(), world.obstacle_centres(), ours)
