@@ -1,5 +1,6 @@
-"""The clearance check against the engine's own distances: `smallest`, with its skipped bodies and
-narrowed queries, gives exactly the minimum a full query of every body gives."""
+"""The clearance check against the engine's own distances: the episode's physics loop, through
+ClearanceMonitor.smallest with its skipped bodies and narrowed queries, reports exactly the minimum
+a full query of every body gives."""
 
 import math
 
@@ -30,27 +31,30 @@ def engine_minimum(robot: HuskyRobot, bodies: list[int], client: int) -> float:
     return min((pt[8] for body_points in points for pt in body_points), default=math.inf)
 
 
-def test_smallest_equals_the_engines_minimum_over_each_period() -> None:
+def test_the_episodes_clearance_is_the_engines_minimum_over_each_period() -> None:
+    """The clearance HuskyEnvironment.advance reports for a control period (ClearanceMonitor.smallest,
+    a running minimum) against every body asked in full after each of its physics steps."""
     world_config = WorldConfig(obstacles=OBSTACLES, arena_half_size_m=2.2)
     config = EpisodeConfig(start=(0.0, 0.0, 0.3), tau_s=0.1, world=world_config)
-    with HuskyEnvironment(config) as env:  # the episode's robot, drive and clearance check
-        world, robot, drive, monitor = env.world, env.robot, env.drive, env.monitor
-        bodies = world.obstacle_ids + world.wall_ids
+    with HuskyEnvironment(config) as env:
+        bodies = env.world.obstacle_ids + env.world.wall_ids
+        in_period: list[float] = []  # the engine's minimum after each physics step of a period
+
+        def ask_every_body(_applied: np.ndarray) -> None:
+            in_period.append(engine_minimum(env.robot, bodies, env.world.client))
+
         checked, contacts, full_queries = 0, 0, 0
         for period in range(60):
             command = np.array([0.6, 1.2 if period < 35 else 0.0])  # turn among them, then push
-            ours, theirs = math.inf, math.inf
-            for _ in range(env.substeps):  # one control period
-                robot.command_wheels(*drive.wheel_speeds(drive.limit(command, world.dt_s)), 40.0)
-                world.step()
-                ours = monitor.smallest(robot.position_xy(), world.obstacle_centres(), ours)
-                theirs = min(theirs, engine_minimum(robot, bodies, world.client))
-                full_queries += len(bodies)
-            if theirs <= monitor.exact_within_m:
+            in_period.clear()
+            _, ours = env.advance(command, on_physics_step=ask_every_body)
+            theirs = min(in_period)
+            full_queries += len(in_period) * len(bodies)
+            if theirs <= env.monitor.exact_within_m:
                 assert ours == pytest.approx(theirs, abs=1e-12), f"period {period}"
                 checked += 1
                 contacts += theirs <= 0.0
             else:  # far: a bound, never above the truth, never inside the exact band
-                assert monitor.exact_within_m < ours <= theirs
+                assert env.monitor.exact_within_m < ours <= theirs
     assert checked >= 30 and contacts >= 1  # the exact band and a contact were both exercised
-    assert monitor.queries < full_queries / 4
+    assert env.monitor.queries < full_queries / 4
