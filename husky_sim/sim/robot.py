@@ -98,17 +98,19 @@ class HuskyRobot:
             physicsClientId=self.client,
         )
 
+    def _base_link(self) -> tuple[tuple[float, ...], tuple[float, ...]]:
+        """base_link's position (m) and quaternion, from PyBullet's centre-of-mass frame."""
+        com_pos, com_orn = p.getBasePositionAndOrientation(self.body, physicsClientId=self.client)
+        return p.multiplyTransforms(com_pos, com_orn, *self._inertial_inv)
+
     def pose(self) -> np.ndarray:
         """base_link [x (m), y (m), yaw (rad)]."""
-        com_pos, com_orn = p.getBasePositionAndOrientation(self.body, physicsClientId=self.client)
-        pos, orn = p.multiplyTransforms(com_pos, com_orn, *self._inertial_inv)
-        yaw = p.getEulerFromQuaternion(orn)[2]
-        return np.array([pos[0], pos[1], yaw])
+        pos, orn = self._base_link()
+        return np.array([pos[0], pos[1], p.getEulerFromQuaternion(orn)[2]])
 
     def position_xy(self) -> tuple[float, float]:
         """base_link's x and y (m), as in `pose` (read every physics step by the clearance check)."""
-        com_pos, com_orn = p.getBasePositionAndOrientation(self.body, physicsClientId=self.client)
-        pos, _ = p.multiplyTransforms(com_pos, com_orn, *self._inertial_inv)
+        pos, _ = self._base_link()
         return pos[0], pos[1]
 
     def base_com_pose(self) -> tuple[tuple[float, ...], tuple[float, ...]]:
