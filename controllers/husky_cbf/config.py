@@ -97,9 +97,15 @@ class GuidanceConfig:
     approach_exit_rad: float = 0.05
     approach_speed_mps: float = 0.6  # |v| cap within slow_radius_m of a set-point: time for the yaw lag
     slow_radius_m: float = 1.5
-    #: a trajectory slower than this (m/s) is approached like a set-point (the paper's dynamic
-    #: tracking circle moves at 0.02 m/s)
+    #: a trajectory slower than this (m/s) will not come to the robot (the paper's dynamic
+    #: tracking circle moves at 0.02 m/s): the robot drives at its point (guidance.point_approach)
+    #: along the bearing beyond point_approach_far_m, turning to the reference's heading closer in,
+    #: and tracks the reference itself within point_approach_near_m (m). Brought onto its tangent
+    #: like onto a set-point's line instead, the Husky backed up metres to dock and rejoined 6.7
+    #: to 9.3 s after a mover had passed (issue 10).
     approach_max_reference_speed_mps: float = 0.1
+    point_approach_near_m: float = 0.1
+    point_approach_far_m: float = 0.3
 
     def __post_init__(self) -> None:
         for name in (
@@ -115,6 +121,8 @@ class GuidanceConfig:
             "approach_speed_mps",
             "slow_radius_m",
             "approach_max_reference_speed_mps",
+            "point_approach_near_m",
+            "point_approach_far_m",
         ):
             _positive(f"guidance.{name}", getattr(self, name))
         for name in (

@@ -5,8 +5,8 @@ Per control step:
    (the last command, which every plan keeps within the drive's acceleration limits) and the body
    yaw rate (the model's prediction corrected by the measured heading change);
 2. the reference: the paper's, unless guidance (guidance.py) gives a waypoint: out of the way of a
-   mover on a collision course, onto a set-point's line near the goal, or along a shortest path
-   when the straight way is blocked;
+   mover on a collision course, onto a set-point's line near the goal (straight at the point of
+   a slow trajectory), or along a shortest path when the straight way is blocked;
 3. the nearest obstacles predicted at constant velocity, each inflated by the margin; a mover
    covers its next mover_sweep_s of travel at every step, with a margin growing with that travel;
 4. the hard OCP (ocp.py); if IPOPT fails, the same OCP with an exactly penalised obstacle slack
@@ -26,7 +26,13 @@ import numpy as np
 from controllers.backends import FatropSolver, IpoptSolver, RawSolution
 from controllers.husky_cbf.config import HuskyCBFConfig
 from controllers.husky_cbf.footprint import disc_cover
-from controllers.husky_cbf.guidance import Guidance, LineApproach, MoverEvasion, inflated_circles
+from controllers.husky_cbf.guidance import (
+    Guidance,
+    LineApproach,
+    MoverEvasion,
+    inflated_circles,
+    point_approach,
+)
 from controllers.husky_cbf.model import extended_step
 from controllers.husky_cbf.ocp import ExtendedPlan, Layout, pack_parameters, solver_for
 from controllers.interface import ControlResult
@@ -111,10 +117,15 @@ class HuskyCBFController:
         goal = (
             ref_states[-1] if isinstance(reference, SetPoint) else self._tracking_goal(reference, circles, t)
         )
-        # where to go now, in priority: out of a mover's way, onto a set-point's line, the goal
-        target = self._evasion.waypoint(pose, speed_mps, obstacles)
-        if target is None and stationary:
-            target = self._approach.waypoint(pose, goal, circles, pre_goal=isinstance(reference, SetPoint))
+        # where to go now, in priority: out of a mover's way, onto a set-point's line (or at a
+        # slow trajectory's point), the goal
+        slow_trajectory = stationary and not isinstance(reference, SetPoint)
+        target = self._evasion.waypoint(pose, 0.0 if slow_trajectory else speed_mps, obstacles)
+        if target is None and slow_trajectory:
+            g = cfg.guidance
+            target = point_approach(pose, goal, g.point_approach_near_m, g.point_approach_far_m)
+        elif target is None and stationary:
+            target = self._approach.waypoint(pose, goal, circles)
         if target is not None:
             goal = np.array([target.x_m, target.y_m, target.heading_rad])
         waypoint = self._guidance.waypoint(pose[:2], goal, obstacles) or target
@@ -154,7 +165,7 @@ class HuskyCBFController:
 
     def _nearly_stationary(self, reference: Reference, ref_speed_mps: float) -> bool:
         """A set-point, or a trajectory slower than approach_max_reference_speed_mps now: a robot
-        must then be brought onto it like onto a set-point (it will not come to the robot)."""
+        must then be brought onto it: it will not come to the robot."""
         return (
             isinstance(reference, SetPoint)
             or ref_speed_mps < self.config.guidance.approach_max_reference_speed_mps

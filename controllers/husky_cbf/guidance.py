@@ -200,18 +200,15 @@ class LineApproach:
         self.pre_goal_done = False
         self.back_to = 0.0  # how far behind the goal (m) the current docking backs up
 
-    def waypoint(
-        self, pose: np.ndarray, goal: np.ndarray, circles: np.ndarray, pre_goal: bool = True
-    ) -> Waypoint | None:
+    def waypoint(self, pose: np.ndarray, goal: np.ndarray, circles: np.ndarray) -> Waypoint | None:
         """The approach waypoint, or None to go for the goal itself; `circles` are the inflated
-        obstacles (inflated_circles); `pre_goal` False skips the pre-goal (a slow trajectory,
-        whose line is only its tangent)."""
+        obstacles (inflated_circles)."""
         cfg = self.config
         h = np.array([math.cos(goal[2]), math.sin(goal[2])])
         d = np.asarray(pose[:2], dtype=float) - goal[:2]
         along, lateral = float(d @ h), float(h[0] * d[1] - h[1] * d[0])
         back = 1.5 * cfg.approach_lookahead_m
-        if pre_goal and not self.pre_goal_done:
+        if not self.pre_goal_done:
             pre_goal = goal[:2] - back * h
             blocked = circles.size and np.any(np.hypot(*(circles[:, :2] - pre_goal).T) < circles[:, 2])
             if math.hypot(*(pose[:2] - pre_goal)) < cfg.approach_exit_m * 10 or along > -back:
@@ -242,12 +239,32 @@ class LineApproach:
         return Waypoint(float(point[0]), float(point[1]), float(goal[2]), np.array([pose[:2], point]))
 
 
+def point_approach(pose: np.ndarray, goal: np.ndarray, near_m: float, far_m: float) -> Waypoint | None:
+    """The approach to a slow trajectory's `goal` (x m, y m, heading rad): None (track the
+    reference) within near_m of it; else the goal point, approached along the bearing from the
+    robot beyond far_m, with the heading turned from that bearing to the reference's own in
+    between. A point that barely moves is reached by driving at it: lining up on its tangent
+    first (LineApproach) costs a docking manoeuvre (backing up metres) for a heading that the
+    tracking error does not judge."""
+    offset = np.asarray(goal[:2], dtype=float) - np.asarray(pose[:2], dtype=float)
+    distance = math.hypot(*offset)
+    if distance <= near_m:
+        return None
+    bearing = math.atan2(offset[1], offset[0])
+    blend = min((distance - near_m) / (far_m - near_m), 1.0) if far_m > near_m else 1.0
+    heading = float(goal[2]) + blend * math.remainder(bearing - float(goal[2]), 2 * math.pi)
+    return Waypoint(float(goal[0]), float(goal[1]), heading, np.array([pose[:2], goal[:2]]))
+
+
 class MoverEvasion:
     """Steps aside early from a mover on a collision course (GuidanceConfig.evade_*).
 
     A skid-steer needs a second or two to turn, so a short horizon that first sees a mover when
     its constraint activates can only back away in front of it (and be chased). Here each mover's
-    track relative to the robot's current velocity is extrapolated evade_horizon_s ahead; if its
+    track relative to the robot moving at `speed_mps` along its heading is extrapolated
+    evade_horizon_s ahead (the controller gives 0 on a slow trajectory, where the robot means to
+    stay: judged against its own flight, a robot reversing ahead of a mover sees no closing track
+    and is chased, in the mover's path, metres from its reference); if its
     closest approach comes within its radius plus the robot's inflation plus evade_margin_m, the
     waypoint is the point that much to the side of the robot (away from the mover's relative
     line; to the robot's left of it when dead ahead), kept until the mover is no longer on
