@@ -13,6 +13,7 @@ import math
 from dataclasses import dataclass, field
 
 from controllers.config import ConfigError, NMPCConfig
+from controllers.husky_cbf.localisation import PoseNoise
 
 
 def _positive(name: str, value: float) -> None:
@@ -170,6 +171,9 @@ class HuskyCBFConfig:
     #: up onto a goal's line), so that turning toward the line pays within a short horizon (m)
     terminal_lookahead_m: float = 0.5
     terminal_speed_weight: float = 5.0  # set-points: arrive at rest ((m/s)^-2 in the cost)
+    #: the localisation's reported pose noise: the set-point approach decides on a filtered pose
+    #: (localisation.PoseFilter); none declared, the measured pose as it is
+    pose_noise: PoseNoise = field(default_factory=PoseNoise)
     soft_penalty: float = 1e4  # exact-penalty weight on the obstacle slack of the re-solve
     slots: int = 6  # nearest obstacles in the NLP
     guidance: GuidanceConfig = field(default_factory=GuidanceConfig)

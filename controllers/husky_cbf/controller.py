@@ -33,6 +33,7 @@ from controllers.husky_cbf.guidance import (
     inflated_circles,
     point_approach,
 )
+from controllers.husky_cbf.localisation import PoseFilter
 from controllers.husky_cbf.model import extended_step
 from controllers.husky_cbf.ocp import ExtendedPlan, Layout, pack_parameters, solver_for
 from controllers.interface import ControlResult
@@ -66,6 +67,7 @@ class HuskyCBFController:
         self._approach = LineApproach(config.guidance)
         self._evasion = MoverEvasion(config.guidance, self._disc_radius + config.margin_m)
         self._step = extended_step(base.tau_s, config.response)
+        self._pose_filter = PoseFilter(config.pose_noise, base.tau_s)
         self.reset()
 
     @property
@@ -85,6 +87,7 @@ class HuskyCBFController:
         self._guidance.reset()
         self._approach.reset()
         self._evasion.reset()
+        self._pose_filter.reset()
         self._hard.reset()
         self._soft.reset()
 
@@ -100,6 +103,7 @@ class HuskyCBFController:
     def _reference(
         self,
         pose: np.ndarray,
+        estimate: np.ndarray,
         speed_mps: float,
         reference: Reference,
         sampled: tuple[np.ndarray, np.ndarray],
@@ -108,7 +112,8 @@ class HuskyCBFController:
         t: float,
     ) -> tuple[np.ndarray, np.ndarray, bool]:
         """The states and feed-forward (N+1, 3), (N, 2) the OCP tracks, and whether they are a
-        guidance waypoint; `sampled` is the reference sampled along the horizon."""
+        guidance waypoint; `sampled` is the reference sampled along the horizon, `estimate` the
+        filtered pose on which the set-point approach decides (localisation.PoseFilter)."""
         cfg, base = self.config, self.config.nmpc
         ref_states, ref_controls = sampled
         w = cfg.omega_cmd_max_radps
@@ -125,7 +130,7 @@ class HuskyCBFController:
             g = cfg.guidance
             target = point_approach(pose, goal, g.point_approach_near_m, g.point_approach_far_m)
         elif target is None and stationary:
-            target = self._approach.waypoint(pose, goal, circles)
+            target = self._approach.waypoint(estimate, goal, circles)
         if target is not None:
             goal = np.array([target.x_m, target.y_m, target.heading_rad])
         waypoint = self._guidance.waypoint(pose[:2], goal, obstacles) or target
@@ -240,15 +245,18 @@ class HuskyCBFController:
         n_real = min(len(obstacles), cfg.slots)
         if pose.shape != (3,) or not np.all(np.isfinite(pose)):
             self._plan = None
+            self._pose_filter.reset()
             return self._brake(
                 np.full(3, np.nan), n_real, len(obstacles) - n_real, start, "invalid state", False
             )
+        yaw_rate = 0.5 * (self._omega_prev + self._omega_body)  # predicted over the last step
+        estimate = self._pose_filter.update(pose, self._applied[0], yaw_rate)
         z0 = self._initial_state(pose)
         sampled = reference.sample(t, base.tau_s, base.horizon)
         now = sampled[0][0].copy()  # the reference at t, before guidance replaces it
         stationary = self._nearly_stationary(reference, float(sampled[1][0, 0]))
         ref_states, ref_controls, guided = self._reference(
-            pose, float(z0[3]), reference, sampled, stationary, obstacles, t
+            pose, estimate, float(z0[3]), reference, sampled, stationary, obstacles, t
         )
         centres, radii = self._obstacles(pose, obstacles)
         lookahead = cfg.terminal_lookahead_m * (-1.0 if self._approach.docking else 1.0)

@@ -35,6 +35,7 @@ from controllers import (
     SolverOptions,
 )
 from controllers.husky_cbf import Footprint, HuskyCBFConfig, HuskyCBFController, RobotResponse
+from controllers.husky_cbf.localisation import PoseNoise
 from husky_sim.paths import SCENARIO_DIR
 from husky_sim.scenario_file import ScenarioFileError, read_scenario_data
 from husky_sim.sim.drive import DriveConfig
@@ -520,6 +521,8 @@ class Scenario(_Strict):
             footprint=Footprint(*geometry.footprint_half_extents_m),
             omega_cmd_max_radps=drive.max_angular_radps,
             slots=slots,
+            # what a localisation would report about its own noise
+            pose_noise=PoseNoise(self.sensing.pose_xy_std_m, self.sensing.pose_yaw_std_rad),
         )
 
     def make_controller(self, name: str) -> Controller:

@@ -13,6 +13,7 @@ import numpy as np
 
 from husky_sim.sim.bullet import pybullet as p
 from husky_sim.sim.geometry import DEFAULT_URDF, RobotGeometry, load_geometry
+from husky_sim.sim.specs import HUSKY_DESCRIPTION
 
 
 @dataclass(frozen=True)
@@ -31,6 +32,23 @@ class WheelFriction:
             raise ValueError(f"wheel_friction.longitudinal: must be > 0, got {self.longitudinal}")
         if not self.lateral_scale > 0:
             raise ValueError(f"wheel_friction.lateral_scale: must be > 0, got {self.lateral_scale}")
+
+
+#: Height (m) of the payload box (payload_inertia): our choice, the manual gives only the mass.
+PAYLOAD_HEIGHT_M = 0.10
+
+
+def payload_inertia(payload_kg: float, com_m: tuple[float, float, float]) -> np.ndarray:
+    """Diagonal inertia (kg m^2) that a payload adds about the chassis centre of mass `com_m` (m,
+    in base_link): a uniform box as long and wide as the chassis ([URDF] base_x_size x base_y_size)
+    and PAYLOAD_HEIGHT_M tall, resting on its top (base_z_size), by the parallel-axis theorem.
+    Products of inertia are dropped, as for the chassis."""
+    d = HUSKY_DESCRIPTION
+    size = np.array([d.base_x_size_m, d.base_y_size_m, PAYLOAD_HEIGHT_M])
+    offset = np.array([0.0, 0.0, d.base_z_size_m + 0.5 * PAYLOAD_HEIGHT_M]) - np.asarray(com_m)
+    own = payload_kg / 12.0 * (np.sum(size**2) - size**2)  # (b^2 + c^2, a^2 + c^2, a^2 + b^2) m / 12
+    shifted = payload_kg * (float(offset @ offset) - offset**2)
+    return own + shifted
 
 
 class HuskyRobot:
@@ -75,8 +93,19 @@ class HuskyRobot:
         if payload_kg < 0:
             raise ValueError(f"payload_kg: must be >= 0 kg, got {payload_kg}")
         if payload_kg > 0:
-            base_mass = p.getDynamicsInfo(self.body, -1, physicsClientId=client)[0]
-            p.changeDynamics(self.body, -1, mass=base_mass + payload_kg, physicsClientId=client)
+            # PyBullet recomputes a base's inertia from its collision boxes as a solid when only its
+            # mass is changed (a 1 g payload made the chassis's yaw inertia 1.74 -> 4.30 kg m^2, and
+            # the loaded Husky barely turned), so the inertia is set too: the chassis's own plus
+            # the payload's. The centre of mass stays the chassis's (PyBullet cannot move it).
+            info = p.getDynamicsInfo(self.body, -1, physicsClientId=client)
+            base_mass, base_inertia, com = info[0], np.array(info[2]), info[3]
+            p.changeDynamics(
+                self.body,
+                -1,
+                mass=base_mass + payload_kg,
+                localInertiaDiagonal=(base_inertia + payload_inertia(payload_kg, com)).tolist(),
+                physicsClientId=client,
+            )
         self._inertial_inv = p.invertTransform(*p.getDynamicsInfo(self.body, -1, physicsClientId=client)[3:5])
         self._wheel_command: tuple[float, float, float] | None = None
         self.command_wheels(0.0, 0.0, 1.0)

@@ -75,3 +75,25 @@ def test_a_loaded_derated_husky_on_grippy_ground_barely_turns() -> None:
     for command in ((0.0, 2.0), (0.5, 1.0)):
         (_, loaded), _ = drive_open_loop(command, 1.0, 4.0, payload_kg=75.0, torque_scale=0.7)
         assert abs(loaded) / command[1] < 0.05
+
+
+def test_a_payload_adds_its_own_inertia_to_the_chassis() -> None:
+    """PyBullet recomputes a base's inertia from its collision shapes when only its mass changes:
+    a 1 g payload used to make the chassis's yaw inertia 1.74 -> 4.30 kg m^2. The payload is a
+    uniform box on the chassis top (robot.payload_inertia): a gram changes nothing, 75 kg adds
+    m (a^2 + b^2) / 12 about the vertical axis."""
+    import pybullet as p
+
+    from husky_sim.sim.specs import HUSKY_DESCRIPTION as d
+
+    with World(WorldConfig()) as world:
+        empty = HuskyRobot(world.client, (0.0, 0.0, 0.0))
+        inertia = lambda robot: np.array(p.getDynamicsInfo(robot.body, -1, physicsClientId=world.client)[2])  # noqa: E731
+        mass = lambda robot: p.getDynamicsInfo(robot.body, -1, physicsClientId=world.client)[0]  # noqa: E731
+        gram = HuskyRobot(world.client, (3.0, 0.0, 0.0), payload_kg=0.001)
+        loaded = HuskyRobot(world.client, (6.0, 0.0, 0.0), payload_kg=75.0)
+        assert inertia(gram) == pytest.approx(inertia(empty), abs=2e-4)
+        assert mass(loaded) == pytest.approx(mass(empty) + 75.0)
+        added = inertia(loaded) - inertia(empty)
+        assert added[2] == pytest.approx(75.0 * (d.base_x_size_m**2 + d.base_y_size_m**2) / 12.0, rel=1e-3)
+        assert added[0] > 75.0 * 0.2**2 and added[1] > added[0]  # carried 0.2 m+ above the centre of mass
