@@ -17,10 +17,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from controllers.config import ConfigError
+
 
 def _non_negative(name: str, value: float) -> None:
     if not (value >= 0 and math.isfinite(value)):
-        raise ValueError(f"{name}: must be >= 0 and finite, got {value}")
+        raise ConfigError(f"{name}: must be >= 0 and finite, got {value}")
 
 
 @dataclass(frozen=True)
@@ -41,8 +43,9 @@ class PoseNoise:
 
 
 def steady_state_gain(process_std: float, measurement_std: float) -> float:
-    """The steady-state Kalman gain in (0, 1] of a random walk with process noise `process_std`
-    per step observed with white noise `measurement_std` (same unit); 1 without noise."""
+    """The steady-state Kalman gain in [0, 1] of a random walk with process noise `process_std`
+    per step observed with white noise `measurement_std` (same unit): 1 without measurement
+    noise (the measurement itself), 0 without process noise (the prediction alone)."""
     if measurement_std <= 0.0:
         return 1.0
     if process_std <= 0.0:
