@@ -13,7 +13,6 @@ import math
 from dataclasses import dataclass, field
 
 from controllers.config import ConfigError, NMPCConfig
-from controllers.husky_cbf.localisation import PoseNoise
 
 
 def _positive(name: str, value: float) -> None:
@@ -52,6 +51,23 @@ class RobotResponse:
             "max_linear_mps",
         ):
             _positive(f"response.{name}", getattr(self, name))
+
+
+@dataclass(frozen=True)
+class PoseNoise:
+    """What the robot's localisation reports about its pose estimate: white-noise standard
+    deviations of position (m, per axis) and heading (rad); and how far the commands predict the
+    motion over one step: the drive's speed error (m/s) and yaw-rate error (rad/s)."""
+
+    position_std_m: float = 0.0
+    yaw_std_rad: float = 0.0
+    speed_error_mps: float = 0.1  # the drive follows a speed command within about 0.1 m/s
+    #: the skid-steer's yaw rate stick-slips about the identified lag by tenths of a rad/s
+    yaw_rate_error_radps: float = 0.3
+
+    def __post_init__(self) -> None:
+        for name in ("position_std_m", "yaw_std_rad", "speed_error_mps", "yaw_rate_error_radps"):
+            _non_negative(f"pose_noise.{name}", getattr(self, name))
 
 
 @dataclass(frozen=True)

@@ -13,33 +13,10 @@ noise declared, the measurement is returned unchanged.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 
 import numpy as np
 
-from controllers.config import ConfigError
-
-
-def _non_negative(name: str, value: float) -> None:
-    if not (value >= 0 and math.isfinite(value)):
-        raise ConfigError(f"{name}: must be >= 0 and finite, got {value}")
-
-
-@dataclass(frozen=True)
-class PoseNoise:
-    """What the robot's localisation reports about its pose estimate: white-noise standard
-    deviations of position (m, per axis) and heading (rad); and how far the commands predict the
-    motion over one step: the drive's speed error (m/s) and yaw-rate error (rad/s)."""
-
-    position_std_m: float = 0.0
-    yaw_std_rad: float = 0.0
-    speed_error_mps: float = 0.1  # the drive follows a speed command within about 0.1 m/s
-    #: the skid-steer's yaw rate stick-slips about the identified lag by tenths of a rad/s
-    yaw_rate_error_radps: float = 0.3
-
-    def __post_init__(self) -> None:
-        for name in ("position_std_m", "yaw_std_rad", "speed_error_mps", "yaw_rate_error_radps"):
-            _non_negative(f"pose_noise.{name}", getattr(self, name))
+from controllers.husky_cbf.config import PoseNoise
 
 
 def steady_state_gain(process_std: float, measurement_std: float) -> float:

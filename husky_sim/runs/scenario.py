@@ -35,7 +35,7 @@ from controllers import (
     SolverOptions,
 )
 from controllers.husky_cbf import Footprint, HuskyCBFConfig, HuskyCBFController, RobotResponse
-from controllers.husky_cbf.localisation import PoseNoise
+from controllers.husky_cbf.config import PoseNoise
 from husky_sim.paths import SCENARIO_DIR
 from husky_sim.scenario_file import ScenarioFileError, read_scenario_data
 from husky_sim.sim.drive import DriveConfig

@@ -8,7 +8,8 @@ import math
 import numpy as np
 import pytest
 
-from controllers.husky_cbf.localisation import PoseFilter, PoseNoise, steady_state_gain
+from controllers.husky_cbf.config import PoseNoise
+from controllers.husky_cbf.localisation import PoseFilter, steady_state_gain
 
 TAU_S = 0.1
 
