@@ -113,6 +113,14 @@ class GuidanceConfig:
     approach_exit_m: float = 0.03
     approach_exit_rad: float = 0.05
     approach_speed_mps: float = 0.6  # |v| cap within slow_radius_m of a set-point: time for the yaw lag
+    #: Pivot (guidance.LineApproach): within pivot_radius_m of a set-point and off its line, turn
+    #: where it stands until aimed at the goal within pivot_aim_rad, drive to within
+    #: pivot_arrive_m of it, and turn to its heading there; pivot again if it drifts beyond
+    #: pivot_restart_m (m, rad)
+    pivot_radius_m: float = 1.0
+    pivot_aim_rad: float = 0.2
+    pivot_arrive_m: float = 0.05
+    pivot_restart_m: float = 0.1
     slow_radius_m: float = 1.5
     #: a trajectory slower than this (m/s) will not come to the robot (the paper's dynamic
     #: tracking circle moves at 0.02 m/s): the robot drives at its point (guidance.point_approach)
@@ -136,6 +144,9 @@ class GuidanceConfig:
             "approach_exit_m",
             "approach_exit_rad",
             "approach_speed_mps",
+            "pivot_aim_rad",
+            "pivot_arrive_m",
+            "pivot_restart_m",
             "slow_radius_m",
             "approach_max_reference_speed_mps",
             "point_approach_near_m",
@@ -144,6 +155,7 @@ class GuidanceConfig:
             _positive(f"guidance.{name}", getattr(self, name))
         for name in (
             "clearance_cost_gain",
+            "pivot_radius_m",
             "mover_sweep_s",
             "release_margin_m",
             "tracking_preview_s",

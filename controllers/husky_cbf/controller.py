@@ -259,7 +259,7 @@ class HuskyCBFController:
             pose, estimate, float(z0[3]), reference, sampled, stationary, obstacles, t
         )
         centres, radii = self._obstacles(pose, obstacles)
-        lookahead = cfg.terminal_lookahead_m * (-1.0 if self._approach.docking else 1.0)
+        lookahead = cfg.terminal_lookahead_m * (-1.0 if self._approach.reversing else 1.0)
         # no approach cap while stepping out of a mover's way: the cap buys docking time for the
         # yaw lag, and a robot that can reverse at only approach_speed_mps is caught by a mover
         caps = self._speed_caps(z0, now, stationary and not self._evasion.active)

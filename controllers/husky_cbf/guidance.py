@@ -189,7 +189,13 @@ class LineApproach:
     a robot off the line is led onto it by a waypoint on the line ahead of it, or, beside or past
     the goal, behind it (docking: it backs up onto the line, then drives in along it). A unicycle
     beside its goal cannot close the gap within a short horizon, and the skid-steer barely answers
-    the small turns that would."""
+    the small turns that would.
+
+    Within pivot_radius_m of the goal and off its line, the robot pivots instead of docking: it
+    turns where it stands to face the goal (or to back onto it, whichever needs less turning in
+    all), drives to it, and turns to the goal's heading there. A loaded skid-steer answers a
+    small turn at a tenth of the command (`husky-sim bench-sim --turn-table`), so a docking
+    manoeuvre gained centimetres per 1.5 m backed up; a pivot turns only where it stands."""
 
     def __init__(self, config: GuidanceConfig) -> None:
         self.config = config
@@ -199,6 +205,15 @@ class LineApproach:
         self.docking = False
         self.pre_goal_done = False
         self.back_to = 0.0  # how far behind the goal (m) the current docking backs up
+        self.pivot = ""  # the pivot's phase: "", "turn", "drive" or "settle"
+        self.pivot_from = np.zeros(2)  # where the pivot's first turn is made (m)
+        self.pivot_heading = 0.0  # the heading (rad) in which the pivot drives to the goal
+        self.pivot_reverse = False  # whether it backs onto the goal
+
+    @property
+    def reversing(self) -> bool:
+        """Whether the robot is meant to move backwards: docking, or a pivot backing onto the goal."""
+        return self.docking or (self.pivot in ("turn", "drive") and self.pivot_reverse)
 
     def waypoint(self, pose: np.ndarray, goal: np.ndarray, circles: np.ndarray) -> Waypoint | None:
         """The approach waypoint, or None to go for the goal itself; `circles` are the inflated
@@ -217,6 +232,9 @@ class LineApproach:
                 return Waypoint(
                     float(pre_goal[0]), float(pre_goal[1]), float(goal[2]), np.array([pose[:2], pre_goal])
                 )
+        pivot = self._pivot(pose, goal, lateral)
+        if pivot is not None or self.pivot:
+            return pivot
         aligned = abs(math.remainder(float(pose[2]) - float(goal[2]), 2 * math.pi)) <= cfg.approach_exit_rad
         on_line = abs(lateral) <= cfg.approach_exit_m and (aligned or not self.docking)
         backed_up = along <= -0.93 * self.back_to  # far enough back: drive in now
@@ -237,6 +255,44 @@ class LineApproach:
             target = min(along + cfg.approach_lookahead_m, 0.0)
         point = goal[:2] + target * h
         return Waypoint(float(point[0]), float(point[1]), float(goal[2]), np.array([pose[:2], point]))
+
+    def _pivot(self, pose: np.ndarray, goal: np.ndarray, lateral: float) -> Waypoint | None:
+        """The pivot's waypoint (None while it settles on the goal, or when not pivoting)."""
+        cfg = self.config
+        offset = np.asarray(goal[:2], dtype=float) - np.asarray(pose[:2], dtype=float)
+        distance = math.hypot(*offset)
+        if self.pivot == "settle" and distance > cfg.pivot_restart_m:
+            self.pivot = ""
+        if not self.pivot and not self.docking:
+            if distance > cfg.pivot_radius_m or abs(lateral) <= cfg.approach_enter_m:
+                return None
+            bearing = math.atan2(offset[1], offset[0])
+            theta, heading = float(pose[2]), float(goal[2])
+
+            def turning(travel: float) -> float:
+                return abs(math.remainder(travel - theta, 2 * math.pi)) + abs(
+                    math.remainder(heading - travel, 2 * math.pi)
+                )
+
+            reverse = turning(bearing + math.pi) < turning(bearing)
+            self.pivot, self.pivot_from = "turn", np.asarray(pose[:2], dtype=float).copy()
+            self.pivot_heading = math.remainder(bearing + (math.pi if reverse else 0.0), 2 * math.pi)
+            self.pivot_reverse = reverse
+        if self.pivot == "turn":
+            if abs(math.remainder(float(pose[2]) - self.pivot_heading, 2 * math.pi)) <= cfg.pivot_aim_rad:
+                self.pivot = "drive"
+            else:
+                x, y = self.pivot_from
+                return Waypoint(float(x), float(y), self.pivot_heading, np.array([pose[:2], self.pivot_from]))
+        if self.pivot == "drive":
+            travel = np.array([math.cos(self.pivot_heading), math.sin(self.pivot_heading)])
+            ahead = float(offset @ travel) * (-1.0 if self.pivot_reverse else 1.0)
+            if distance > cfg.pivot_arrive_m and ahead > 0.0:
+                return Waypoint(
+                    float(goal[0]), float(goal[1]), self.pivot_heading, np.array([pose[:2], goal[:2]])
+                )
+            self.pivot = "settle"
+        return None
 
 
 def point_approach(pose: np.ndarray, goal: np.ndarray, near_m: float, far_m: float) -> Waypoint | None:

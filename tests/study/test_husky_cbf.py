@@ -15,7 +15,13 @@ from controllers import Obstacle
 from controllers.husky_cbf import Footprint
 from controllers.husky_cbf.config import GuidanceConfig, RobotResponse
 from controllers.husky_cbf.footprint import disc_cover
-from controllers.husky_cbf.guidance import Guidance, MoverEvasion, point_approach, segment_blocked
+from controllers.husky_cbf.guidance import (
+    Guidance,
+    LineApproach,
+    MoverEvasion,
+    point_approach,
+    segment_blocked,
+)
 from controllers.husky_cbf.model import extended_step
 from husky_sim.runs.run import run_scenario
 from husky_sim.runs.scenario import load_scenario, shipped_scenarios
@@ -121,6 +127,40 @@ def test_a_slow_trajectory_is_approached_along_the_bearing_and_tracked_when_near
     between = point_approach(np.array([0.8, 0.0, 0.0]), goal, 0.1, 0.3)  # 0.2 m: half way
     assert between is not None
     assert between.heading_rad == pytest.approx(0.5 * (0.0 + math.pi / 2))
+
+
+def test_a_robot_beside_its_set_point_pivots_turns_drives_and_settles() -> None:
+    """Beside the goal and off its line, the approach turns where the robot stands to face the
+    goal, then drives at it, then leaves the goal's heading to the NMPC; past the goal it backs
+    onto it instead of turning round; far off the line it does not pivot."""
+    config = GuidanceConfig()
+    approach = LineApproach(config)
+    approach.pre_goal_done = True
+    goal, none = np.array([7.0, 0.0, 0.0]), np.zeros((0, 3))
+    pose = np.array([6.7, 0.25, 0.0])  # 0.3 m short, 0.25 m beside
+    turn = approach.waypoint(pose, goal, none)
+    bearing = math.atan2(-0.25, 0.3)
+    assert turn is not None and (turn.x_m, turn.y_m) == (6.7, 0.25)  # turn where it stands
+    assert turn.heading_rad == pytest.approx(bearing) and approach.pivot == "turn"
+    assert not approach.reversing
+    aimed = np.array([6.7, 0.25, bearing + 0.5 * config.pivot_aim_rad])
+    drive = approach.waypoint(aimed, goal, none)
+    assert drive is not None and (drive.x_m, drive.y_m) == (7.0, 0.0) and approach.pivot == "drive"
+    assert approach.waypoint(np.array([6.98, 0.02, bearing]), goal, none) is None  # arrived
+    assert approach.pivot == "settle"
+    assert approach.waypoint(np.array([7.03, 0.05, -0.4]), goal, none) is None  # settling
+    approach.waypoint(np.array([7.0, 0.15, 0.0]), goal, none)  # drifted 0.15 m aside: pivots again
+    assert approach.pivot == "turn"
+
+    past = LineApproach(config)
+    past.pre_goal_done = True
+    back = past.waypoint(np.array([7.3, 0.25, 0.0]), goal, none)  # past the goal, facing on
+    assert back is not None and past.reversing  # backs onto the goal: less turning in all
+    assert math.cos(back.heading_rad) > 0.5
+    beside = LineApproach(config)
+    beside.pre_goal_done = True
+    beside.waypoint(np.array([7.0, 1.5, 0.0]), goal, none)  # beyond pivot_radius_m: docks
+    assert beside.pivot == "" and beside.docking
 
 
 def test_evasion_judges_a_mover_against_the_robot_where_it_means_to_be() -> None:
