@@ -12,6 +12,7 @@ from husky_sim.cli.common import (
     horizon_arg,
     jobs_arg,
     path_arg,
+    payload_arg,
     seed_arg,
     unit_float_arg,
 )
@@ -21,6 +22,7 @@ def cmd_check(args: argparse.Namespace) -> int:
     from pathlib import Path
 
     from husky_sim.realcheck.check import CheckOptions, run_check
+    from husky_sim.realcheck.sweep import PerturbationRanges
     from husky_sim.runs.run_folder import default_check_dir, prepare_out_dir
     from husky_sim.runs.scenario import load_scenario
 
@@ -35,6 +37,9 @@ def cmd_check(args: argparse.Namespace) -> int:
         scheduler=args.scheduler,
         timing_solves=args.timing_solves,
         min_pass_rate=args.min_pass_rate,
+        ranges=PerturbationRanges()
+        if args.payload_kg is None
+        else PerturbationRanges(payload_kg=tuple(args.payload_kg)),
     )
     sc = load_scenario(args.scenario)
     horizon = sc.with_overrides(horizon=args.horizon).controller.horizon  # range-checked here
@@ -66,6 +71,15 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     check.add_argument("--timing-solves", type=count_arg, default=100, help="NMPC solves timed (default 100)")
     check.add_argument(
         "--min-pass-rate", type=unit_float_arg, default=0.95, help="pass rate needed in [0, 1] (default 0.95)"
+    )
+    check.add_argument(
+        "--payload-kg",
+        type=payload_arg,
+        nargs=2,
+        metavar=("LOW", "HIGH"),
+        default=None,
+        help="payload range drawn, kg in [0, 75] (default: the whole range, up to the Husky's "
+        "maximum); check with the payload the robot will carry",
     )
     check.add_argument(
         "--out", type=path_arg, default=None, help="output directory (default results/check__...)"

@@ -7,6 +7,8 @@ import argparse
 import math
 import sys
 
+from husky_sim.sim.specs import HUSKY_SPEC_SHEET
+
 #: The controllers a command may choose (controllers.CONTROLLER_NAMES, without importing CasADi
 #: before the signal handlers are in place; a test keeps the two equal).
 CONTROLLER_CHOICES = ("none", "bt", "cbf", "relax-cbf", "husky-cbf")
@@ -64,6 +66,8 @@ seed_arg = number_in(int, 0, 2**32 - 1)
 jobs_arg = number_in(int, 1, MAX_JOBS)
 count_arg = number_in(int, 1, MAX_SAMPLES)
 unit_float_arg = number_in(float, 0.0, 1.0)
+#: A payload (kg) on the Husky's top plate: at most the spec sheet's maximum.
+payload_arg = number_in(float, 0.0, HUSKY_SPEC_SHEET.max_payload_kg)
 
 
 #: Where a suite's runs or a check's samples run (husky_sim.runs.parallel.BACKENDS, kept equal by

@@ -219,14 +219,17 @@ def test_check_cli_writes_reports_and_a_failing_sample_reproduces(
     scenario_file.write_text(yaml.safe_dump(_short_moving_scenario().model_dump(mode="json")))
     out = tmp_path / "check"
     argv = ["check", str(scenario_file), "--samples", "2", "--jobs", "1", "--timing-solves", "10"]
-    rc = main([*argv, "--seed", "5", "--out", str(out)])
+    rc = main([*argv, "--seed", "5", "--payload-kg", "10", "20", "--out", str(out)])
     printed = capsys.readouterr().out
     assert rc == 1
     assert "FAIL: the unperturbed scenario already fails (timeout)" in printed
     report = json.loads((out / "check.json").read_text())
     assert report["verdict"] == "FAIL" and report["stats"]["passed"] == 0
     assert [p["index"] for p in report["perturbations"]] == [0, 1]
-    assert report["perturbations"] == [p.as_dict() for p in sample_perturbations(PerturbationRanges(), 2, 5)]
+    ranges = PerturbationRanges(payload_kg=(10.0, 20.0))  # the payload the robot will carry
+    assert report["perturbations"] == [p.as_dict() for p in sample_perturbations(ranges, 2, 5)]
+    assert report["ranges"]["payload_kg"] == [10.0, 20.0]
+    assert all(10.0 <= p["payload_kg"] <= 20.0 for p in report["perturbations"])
     for name in ("check.md", "clearance_hist.png", "sensitivity.png"):
         assert (out / name).stat().st_size > 0
     assert "## Configuration audit" in (out / "check.md").read_text()
@@ -261,6 +264,8 @@ def test_run_sample_matches_run_scenario_in_process() -> None:
         (["check", "narrow_gap", "--samples", "0"], "samples"),
         (["check", "narrow_gap", "--jobs", "0"], "jobs"),
         (["check", "narrow_gap", "--scheduler", "tcp://127.0.0.1:8786"], "scheduler"),
+        (["check", "narrow_gap", "--payload-kg", "0", "80"], "payload-kg"),  # above the Husky's 75 kg
+        (["check", "narrow_gap", "--payload-kg", "30", "10"], "payload_kg"),
     ],
 )
 def test_bad_input_is_one_line_and_exit_code_2(
