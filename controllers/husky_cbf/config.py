@@ -94,6 +94,13 @@ class GuidanceConfig:
     lookahead_m: float = 1.5  # the waypoint: the farthest path point within this, in sight
     mover_sweep_s: float = 2.0  # a mover blocks where it will be over the next seconds
     release_margin_m: float = 0.1  # a guided robot leaves guidance only with this much to spare
+    #: among static obstacles, cells within path_hysteresis_width_m (m) of the last path cost this
+    #: fraction less: with an obstacle dead ahead and a few cm of obstacle noise, the shortest way
+    #: round changed sides from one step to the next and a loaded Husky, turning neither way,
+    #: drove into it (check). Not among movers: there a mover crossing the path taken made the
+    #: robot keep to it and touch the mover (paper_dynamic_tracking_crossing, N = 5)
+    path_hysteresis: float = 0.2
+    path_hysteresis_width_m: float = 0.2
     #: Mover evasion (guidance.MoverEvasion): a mover whose track relative to the robot comes
     #: within its radius + the robot's inflation + evade_margin_m in the next evade_horizon_s
     #: makes the robot step aside now
@@ -133,6 +140,8 @@ class GuidanceConfig:
     point_approach_far_m: float = 0.3
 
     def __post_init__(self) -> None:
+        if not 0.0 <= self.path_hysteresis < 1.0:
+            raise ConfigError(f"guidance.path_hysteresis: must be in [0, 1), got {self.path_hysteresis}")
         for name in (
             "grid_resolution_m",
             "grid_padding_m",
@@ -155,6 +164,7 @@ class GuidanceConfig:
             _positive(f"guidance.{name}", getattr(self, name))
         for name in (
             "clearance_cost_gain",
+            "path_hysteresis_width_m",
             "pivot_radius_m",
             "mover_sweep_s",
             "release_margin_m",
@@ -202,6 +212,14 @@ class HuskyCBFConfig:
     #: the localisation's reported pose noise: the set-point approach decides on a filtered pose
     #: (localisation.PoseFilter); none declared, the measured pose as it is
     pose_noise: PoseNoise = field(default_factory=PoseNoise)
+    #: turn monitor (turn_monitor.py): over the last weak_turn_window_s (s), once the model
+    #: predicted at least weak_turn_min_rad of heading change, a robot on its way to a set-point
+    #: that turned less than weak_turn_ratio of it is held to weak_turn_speed_mps (m/s): it may
+    #: not steer round what its plan goes round, and must be able to stop before it
+    weak_turn_window_s: float = 1.6
+    weak_turn_min_rad: float = 0.3
+    weak_turn_ratio: float = 0.4
+    weak_turn_speed_mps: float = 0.4
     soft_penalty: float = 1e4  # exact-penalty weight on the obstacle slack of the re-solve
     slots: int = 6  # nearest obstacles in the NLP
     guidance: GuidanceConfig = field(default_factory=GuidanceConfig)
@@ -231,6 +249,10 @@ class HuskyCBFConfig:
         ):
             _non_negative(name, getattr(self, name))
         _positive("soft_penalty", self.soft_penalty)
+        for name in ("weak_turn_window_s", "weak_turn_min_rad", "weak_turn_speed_mps"):
+            _positive(name, getattr(self, name))
+        if not 0.0 <= self.weak_turn_ratio <= 1.0:
+            raise ConfigError(f"weak_turn_ratio: must be in [0, 1], got {self.weak_turn_ratio}")
         if len(self.accel_weight) != 2 or min(self.accel_weight) < 0:
             raise ConfigError(f"accel_weight: two weights >= 0, got {self.accel_weight}")
         if len(self.terminal_weight) != 3 or min(self.terminal_weight) < 0:

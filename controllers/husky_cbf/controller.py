@@ -36,6 +36,7 @@ from controllers.husky_cbf.guidance import (
 from controllers.husky_cbf.localisation import PoseFilter
 from controllers.husky_cbf.model import extended_step
 from controllers.husky_cbf.ocp import ExtendedPlan, Layout, pack_parameters, solver_for
+from controllers.husky_cbf.turn_monitor import TurnMonitor
 from controllers.interface import ControlResult
 from controllers.model import wrap_angle
 from controllers.obstacles import Obstacle, predict_obstacles
@@ -68,6 +69,7 @@ class HuskyCBFController:
         self._evasion = MoverEvasion(config.guidance, self._disc_radius + config.margin_m)
         self._step = extended_step(base.tau_s, config.response)
         self._pose_filter = PoseFilter(config.pose_noise, base.tau_s)
+        self._turns = TurnMonitor(round(config.weak_turn_window_s / base.tau_s), config.weak_turn_min_rad)
         self.reset()
 
     @property
@@ -88,6 +90,7 @@ class HuskyCBFController:
         self._approach.reset()
         self._evasion.reset()
         self._pose_filter.reset()
+        self._turns.reset()
         self._hard.reset()
         self._soft.reset()
 
@@ -176,19 +179,30 @@ class HuskyCBFController:
             or ref_speed_mps < self.config.guidance.approach_max_reference_speed_mps
         )
 
-    def _speed_caps(self, z0: np.ndarray, goal: np.ndarray, stationary: bool) -> np.ndarray:
-        """|v| cap per predicted step (m/s): approach_speed_mps within slow_radius_m of the `goal`
-        (m) of a (nearly) stationary reference (reached from the current speed at the drive's
-        deceleration), else v_max."""
+    def _speed_caps(
+        self, z0: np.ndarray, goal: np.ndarray, stationary: bool, set_point: bool, evading: bool
+    ) -> np.ndarray:
+        """|v| cap per predicted step (m/s), reached from the current speed at the drive's
+        deceleration: approach_speed_mps within slow_radius_m of the `goal` (m) of a (nearly)
+        stationary reference; on the way to a set-point, weak_turn_speed_mps while the robot turns
+        less than weak_turn_ratio of what its model predicts (turn_monitor.py); else v_max. No cap
+        while `evading` a mover: the approach cap buys docking time for the yaw lag, and a robot
+        that can reverse at only the cap is caught by a mover. Not on a trajectory: there the
+        monitor slowed an unloaded Husky (paper_dynamic_tracking_crossing, N = 12: rejoined in
+        10.3 s, not 5) and a loaded one still collided as often in `check`."""
         cfg, base = self.config, self.config.nmpc
         v_max = max(base.v_max_mps, -base.v_min_mps)
+        cap = v_max
+        near = math.hypot(z0[0] - goal[0], z0[1] - goal[1]) <= cfg.guidance.slow_radius_m
+        if stationary and near and not evading:
+            cap = cfg.guidance.approach_speed_mps
+        if set_point and self._turns.ratio < cfg.weak_turn_ratio and not evading:
+            cap = min(cap, cfg.weak_turn_speed_mps)
+        if cap >= v_max:
+            return np.full(base.horizon, v_max)
         steps = np.arange(1, base.horizon + 1)
-        if not stationary:
-            return np.full(base.horizon, v_max)
-        if math.hypot(z0[0] - goal[0], z0[1] - goal[1]) > cfg.guidance.slow_radius_m:
-            return np.full(base.horizon, v_max)
         braking = abs(z0[3]) - cfg.response.max_linear_accel_mps2 * base.tau_s * steps
-        return np.minimum(np.maximum(cfg.guidance.approach_speed_mps, braking), v_max)
+        return np.minimum(np.maximum(cap, braking), v_max)
 
     def _warm_guess(self, z0: np.ndarray) -> ExtendedPlan:
         n = self.config.nmpc.horizon
@@ -251,6 +265,8 @@ class HuskyCBFController:
             )
         yaw_rate = 0.5 * (self._omega_prev + self._omega_body)  # predicted over the last step
         estimate = self._pose_filter.update(pose, self._applied[0], yaw_rate)
+        if self._yaw_prev is not None:
+            self._turns.update(yaw_rate * base.tau_s, float(wrap_angle(pose[2] - self._yaw_prev)))
         z0 = self._initial_state(pose)
         sampled = reference.sample(t, base.tau_s, base.horizon)
         now = sampled[0][0].copy()  # the reference at t, before guidance replaces it
@@ -260,9 +276,7 @@ class HuskyCBFController:
         )
         centres, radii = self._obstacles(pose, obstacles)
         lookahead = cfg.terminal_lookahead_m * (-1.0 if self._approach.reversing else 1.0)
-        # no approach cap while stepping out of a mover's way: the cap buys docking time for the
-        # yaw lag, and a robot that can reverse at only approach_speed_mps is caught by a mover
-        caps = self._speed_caps(z0, now, stationary and not self._evasion.active)
+        caps = self._speed_caps(z0, now, stationary, isinstance(reference, SetPoint), self._evasion.active)
         p = pack_parameters(z0, ref_states, ref_controls, centres, radii, caps, lookahead)
         guess = self._warm_guess(z0)
         hard, soft = self._hard_problem.layout, self._soft_problem.layout

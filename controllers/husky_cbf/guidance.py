@@ -29,6 +29,7 @@ from controllers.husky_cbf.config import GuidanceConfig
 from controllers.obstacles import Obstacle
 
 MAX_GRID_CELLS = 200_000  # a larger area is searched on a coarser grid
+STATIC_SPEED_MPS = 0.05  # an obstacle slower than this (m/s) counts as static
 
 
 @dataclass(frozen=True)
@@ -74,15 +75,17 @@ def segment_blocked(a: np.ndarray, b: np.ndarray, circles: np.ndarray, extra_m: 
 
 
 class Guidance:
-    """Remembers whether the last step was guided (for the release margin)."""
+    """Remembers whether the last step was guided (for the release margin) and the path it took
+    (which the next search favours: path_hysteresis)."""
 
     def __init__(self, config: GuidanceConfig, inflation_m: float) -> None:
         self.config = config
         self.inflation_m = inflation_m
-        self.guided = False
+        self.reset()
 
     def reset(self) -> None:
         self.guided = False
+        self.path: np.ndarray | None = None  # the last path taken ((K, 2), m)
 
     def waypoint(
         self, robot_xy: np.ndarray, goal: np.ndarray, obstacles: Sequence[Obstacle]
@@ -93,16 +96,22 @@ class Guidance:
         circles = inflated_circles(obstacles, self.inflation_m, cfg.mover_sweep_s, robot_xy)
         extra = cfg.release_margin_m if self.guided else 0.0
         if not segment_blocked(robot_xy, goal[:2], circles, extra):
-            self.guided = False
+            self.guided, self.path = False, None
             return None
-        path = self._shortest_path(robot_xy, np.asarray(goal[:2], dtype=float), circles)
+        # among movers the way round changes for real from step to step: no hysteresis
+        static = all(math.hypot(o.vx_mps, o.vy_mps) <= STATIC_SPEED_MPS for o in obstacles)
+        path = self._shortest_path(robot_xy, np.asarray(goal[:2], dtype=float), circles, static)
         if path is None or len(path) < 2:  # no way round (yet): wait behind the obstacle
-            self.guided = False
+            self.guided, self.path = False, None
             return None
-        self.guided = True
+        self.guided, self.path = True, path
         return self._carrot(robot_xy, path, circles, goal)
 
-    def _shortest_path(self, start: np.ndarray, goal: np.ndarray, circles: np.ndarray) -> np.ndarray | None:
+    def _shortest_path(
+        self, start: np.ndarray, goal: np.ndarray, circles: np.ndarray, sticky: bool
+    ) -> np.ndarray | None:
+        """Cheapest grid path start -> goal (m) round the `circles`; `sticky`: favouring the last
+        path (path_hysteresis)."""
         cfg = self.config
         lo = np.minimum(start, goal) - cfg.grid_padding_m
         hi = np.maximum(start, goal) + cfg.grid_padding_m
@@ -124,6 +133,17 @@ class Guidance:
         occupied[si, sj] = False
         clearance = ndimage.distance_transform_edt(~occupied) * res
         cost = 1.0 + cfg.clearance_cost_gain * np.clip(1.0 - clearance / cfg.clearance_cost_m, 0.0, 1.0)
+        if sticky and self.path is not None and cfg.path_hysteresis > 0:
+            # cells along the last path cost less, so the way round does not change sides on a
+            # few cm of sensing noise
+            near = np.zeros_like(occupied)
+            pi = np.clip(np.round((self.path[:, 1] - lo[1]) / res).astype(int), 0, ny - 1)
+            pj = np.clip(np.round((self.path[:, 0] - lo[0]) / res).astype(int), 0, nx - 1)
+            near[pi, pj] = True
+            width = int(round(cfg.path_hysteresis_width_m / res))
+            if width > 0:
+                near = ndimage.binary_dilation(near, iterations=width)
+            cost = np.where(near, (1.0 - cfg.path_hysteresis) * cost, cost)
         index = np.arange(nx * ny).reshape(ny, nx)
         rows, cols, weights = [], [], []
         for di, dj in ((0, 1), (1, 0), (1, 1), (1, -1)):

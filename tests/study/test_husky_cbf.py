@@ -23,6 +23,7 @@ from controllers.husky_cbf.guidance import (
     segment_blocked,
 )
 from controllers.husky_cbf.model import extended_step
+from controllers.husky_cbf.turn_monitor import TurnMonitor
 from husky_sim.runs.run import run_scenario
 from husky_sim.runs.scenario import load_scenario, shipped_scenarios
 from husky_sim.runs.summary import RunSummary
@@ -116,6 +117,47 @@ def test_guidance_routes_round_a_blocking_obstacle_and_leaves_a_clear_line_alone
     assert not segment_blocked(np.zeros(2), np.array([waypoint.x_m, waypoint.y_m]), circles)
     assert np.min(np.hypot(waypoint.path[:, 0] - 4.0, waypoint.path[:, 1] - 0.1)) > 1.08
     assert math.hypot(waypoint.path[-1, 0] - 8.0, waypoint.path[-1, 1]) < 0.1
+
+
+def test_the_way_round_a_static_obstacle_dead_ahead_keeps_its_side_under_noise() -> None:
+    """An obstacle dead ahead measured 3 cm to one side, then the other: without hysteresis the
+    shortest way round changes sides; with it the robot keeps the side it took. Among movers there
+    is no hysteresis (the way round changes for real)."""
+    goal = np.array([7.0, 0.0, 0.0])
+
+    def sides(config: GuidanceConfig, vx_mps: float = 0.0) -> list[float]:
+        guidance = Guidance(config, inflation_m=0.48)
+        out = []
+        for dy in (0.03, -0.03, 0.03, -0.03):
+            waypoint = guidance.waypoint(np.zeros(2), goal, [Obstacle(3.5, dy, 0.45, vx_mps=vx_mps)])
+            assert waypoint is not None
+            beside = waypoint.path[np.argmin(np.abs(waypoint.path[:, 0] - 3.5))]  # passing it
+            out.append(math.copysign(1.0, beside[1]))
+        return out
+
+    assert len(set(sides(GuidanceConfig(path_hysteresis=0.0)))) == 2  # flips with the noise
+    assert len(set(sides(GuidanceConfig()))) == 1  # keeps its side
+    assert len(set(sides(GuidanceConfig(), vx_mps=-0.3))) == 2  # a mover: no hysteresis
+
+
+def test_the_turn_monitor_compares_measured_with_predicted_heading_change() -> None:
+    monitor = TurnMonitor(window_steps=8, min_turn_rad=0.3)
+    for _ in range(8):
+        assert monitor.update(0.02, 0.0) == 1.0  # 0.16 rad predicted: too little to judge
+    for _ in range(8):
+        ratio = monitor.update(-0.1, -0.02)  # turning right at a fifth of the model
+    assert ratio == pytest.approx(0.2)
+    for _ in range(8):
+        ratio = monitor.update(0.0, 0.0)  # no turn asked: the last judgement holds
+    assert ratio == pytest.approx(0.2)
+    for _ in range(8):
+        ratio = monitor.update(0.1, -0.05)  # turning the wrong way: 0, never negative
+    assert ratio == 0.0
+    for _ in range(8):
+        ratio = monitor.update(0.1, 0.12)  # better than the model: capped at 1
+    assert ratio == 1.0
+    monitor.reset()
+    assert monitor.ratio == 1.0
 
 
 def test_a_slow_trajectory_is_approached_along_the_bearing_and_tracked_when_near() -> None:
