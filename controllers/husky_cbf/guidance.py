@@ -283,6 +283,8 @@ class LineApproach:
         distance = math.hypot(*offset)
         if self.pivot == "settle" and distance > cfg.pivot_restart_m:
             self.pivot = ""
+        if self.pivot and distance > cfg.pivot_radius_m + cfg.pivot_restart_m:
+            self.pivot = ""  # taken away (out of a mover's way): judged afresh when back
         if not self.pivot and not self.docking:
             if distance > cfg.pivot_radius_m or abs(lateral) <= cfg.approach_enter_m:
                 return None

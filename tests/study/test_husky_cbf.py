@@ -193,6 +193,8 @@ def test_a_robot_beside_its_set_point_pivots_turns_drives_and_settles() -> None:
     assert approach.waypoint(np.array([7.03, 0.05, -0.4]), goal, none) is None  # settling
     approach.waypoint(np.array([7.0, 0.15, 0.0]), goal, none)  # drifted 0.15 m aside: pivots again
     assert approach.pivot == "turn"
+    approach.waypoint(np.array([5.5, 0.5, 0.0]), goal, none)  # taken 1.6 m away mid-pivot
+    assert approach.pivot == ""
 
     past = LineApproach(config)
     past.pre_goal_done = True
