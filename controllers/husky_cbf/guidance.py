@@ -125,11 +125,12 @@ class Guidance:
             gx, gy = np.meshgrid(xs[j0:j1], ys[i0:i1])
             occupied[i0:i1, j0:j1] |= (gx - cx) ** 2 + (gy - cy) ** 2 < r * r
 
-        def cell(point: np.ndarray) -> tuple[int, int]:
-            """(row, column) of the grid cell holding a point."""
-            return int(round((point[1] - lo[1]) / res)), int(round((point[0] - lo[0]) / res))
+        def cells(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+            """(rows, columns) of the grid cells nearest to points (..., 2) (m), within the grid."""
+            rows = np.clip(np.round((points[..., 1] - lo[1]) / res).astype(int), 0, ny - 1)
+            return rows, np.clip(np.round((points[..., 0] - lo[0]) / res).astype(int), 0, nx - 1)
 
-        si, sj = cell(start)
+        si, sj = cells(start)
         occupied[si, sj] = False
         clearance = ndimage.distance_transform_edt(~occupied) * res
         cost = 1.0 + cfg.clearance_cost_gain * np.clip(1.0 - clearance / cfg.clearance_cost_m, 0.0, 1.0)
@@ -137,9 +138,7 @@ class Guidance:
             # cells along the last path cost less, so the way round does not change sides on a
             # few cm of sensing noise
             near = np.zeros_like(occupied)
-            pi = np.clip(np.round((self.path[:, 1] - lo[1]) / res).astype(int), 0, ny - 1)
-            pj = np.clip(np.round((self.path[:, 0] - lo[0]) / res).astype(int), 0, nx - 1)
-            near[pi, pj] = True
+            near[cells(self.path)] = True
             width = int(round(cfg.path_hysteresis_width_m / res))
             if width > 0:
                 near = ndimage.binary_dilation(near, iterations=width)
@@ -160,9 +159,7 @@ class Guidance:
         ).tocsr()
         source = int(index[si, sj])
         distance, predecessors = dijkstra(graph, directed=False, indices=source, return_predecessors=True)
-        gi, gj = cell(goal)
-        gi, gj = min(max(gi, 0), ny - 1), min(max(gj, 0), nx - 1)
-        target = int(index[gi, gj])
+        target = int(index[cells(goal)])
         if not np.isfinite(distance[target]):
             reachable = np.flatnonzero(np.isfinite(distance))
             if reachable.size <= 1:
