@@ -42,6 +42,9 @@ class ControlResult:
     guided: bool = False  # tracked a guidance waypoint instead of the reference (path blocked)
     solver: str = ""  # the NLP solver whose answer this is (fatrop, ipopt, opti)
     solver_fallback: str = ""  # why the structured solver's answer was not used (IPOPT solved)
+    # no solver ran: every problem of the step had been solved before, this step or the last, bit
+    # for bit, and its answer was reused (controllers.backends.repeats)
+    repeated: bool = False
 
     @property
     def is_fallback(self) -> bool:

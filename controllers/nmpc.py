@@ -11,6 +11,10 @@ states are still collision-free against the obstacles as now predicted; otherwis
 command v = 0, omega = 0. The result is marked as a fallback and the loop goes on; `solve` never
 raises for a solver failure. A signal (Ctrl-C, SIGTERM) during a solve is not a failure: it
 reaches the program's handler (controllers.signals).
+
+A problem posed bit for bit before, this step or the last (a robot standing still in the kinematic
+loop), is answered as it was then, not solved again, where the backend's answer depends on the
+problem alone (controllers.backends.repeats); a step that ran no solver at all is marked `repeated`.
 """
 
 from __future__ import annotations
@@ -22,6 +26,7 @@ import numpy as np
 
 from controllers.backends import FatropSolver, IpoptSolver, RawSolution, make_solver
 from controllers.backends.opti import OptiSolver
+from controllers.backends.repeats import RepeatedProblems
 from controllers.config import NMPCConfig
 from controllers.interface import ControlResult, FallbackKind
 from controllers.model import step
@@ -48,6 +53,8 @@ class NMPCController:
         self._layout = self._problem.layout
         self._plan: Plan | None = None  # last successfully solved plan
         self._plan_age = 0  # control steps since that plan was solved
+        self._repeats = RepeatedProblems() if self._backend.pure else None
+        self._solves = [0, 0]  # this step's problems: [solved, answered by self._repeats]
         #: Called with each control step's problem (parameter vector, warm-start guess) before it
         #: is solved (not the retries): how `husky-sim bench` records a closed loop to replay.
         self.on_solve: Callable[[np.ndarray, np.ndarray], None] | None = None
@@ -59,6 +66,8 @@ class NMPCController:
     def reset(self) -> None:
         self._plan, self._plan_age = None, 0
         self._backend.reset()
+        if self._repeats is not None:
+            self._repeats.clear()
 
     # -- per-step preparation -------------------------------------------------------------
     def _parameters(
@@ -119,6 +128,9 @@ class NMPCController:
         self, state: np.ndarray, reference: Reference, obstacles: Sequence[Obstacle], t: float
     ) -> ControlResult:
         start = time.perf_counter()
+        if self._repeats is not None:
+            self._repeats.next_step()
+        self._solves = [0, 0]
         state = np.asarray(state, dtype=float).reshape(-1)
         n_real = min(len(obstacles), self.config.obstacle_slots)
         ignored = len(obstacles) - n_real
@@ -132,7 +144,7 @@ class NMPCController:
             self.on_solve(p_vec, guess_vector)
         with deliver_after_solve():  # an interrupt is delivered, never taken for a failed solve
             try:
-                raw = self._backend.solve(p_vec, guess_vector)
+                raw = self._run_solver(p_vec, guess_vector)
             except Exception as exc:  # noqa: BLE001 - a control loop must survive any solver error
                 raw = RawSolution(guess_vector, False, f"exception: {exc}", -1, self.backend_name)
         recovered_by = ""
@@ -171,7 +183,18 @@ class NMPCController:
             recovered_by=recovered_by,
             solver=raw.solver,
             solver_fallback="; ".join(r for r in dict.fromkeys(solver_fallbacks) if r),
+            repeated=self._solves[0] == 0 and self._solves[1] > 0,
         )
+
+    def _run_solver(self, p_vec: np.ndarray, guess: np.ndarray) -> RawSolution:
+        """The backend's answer to one problem, looked up where this step or the one before posed
+        the same problem (controllers.backends.repeats)."""
+        if self._repeats is None:
+            raw, repeated = self._backend.solve(p_vec, guess), False
+        else:
+            raw, repeated = self._repeats.solve(self._backend.solve, p_vec, guess)
+        self._solves[1 if repeated else 0] += 1
+        return raw
 
     def _retry(
         self, state: np.ndarray, params: OCPParameters, p_vec: np.ndarray
@@ -197,7 +220,7 @@ class NMPCController:
             self._backend.reset()
             with deliver_after_solve():
                 try:
-                    raw = self._backend.solve(p_vec, guess)
+                    raw = self._run_solver(p_vec, guess)
                 except Exception:  # noqa: BLE001 - try the next guess
                     continue
             if raw.success:

@@ -129,6 +129,9 @@ class FatropSolver:
     """One NLP solved by compiled FATROP, falling back to IPOPT; a solve is one function call."""
 
     name = "fatrop"
+    #: A solve's answer is a function of (parameters, guess) alone: the compiled solver keeps
+    #: nothing between calls, and the IPOPT fallback starts cold (controllers.backends.repeats).
+    pure = True
 
     def __init__(self, nlp: NLP, options: SolverOptions, fallback_max_iter: int | None = None) -> None:
         lbx, ubx, lbg, ubg = nlp.bounds

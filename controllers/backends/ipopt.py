@@ -50,6 +50,7 @@ class IpoptSolver:
     """
 
     name = "ipopt"
+    pure = False  # a solve after a success is warm-started from its multipliers
 
     def __init__(self, nlp: NLP, options: SolverOptions) -> None:
         self._bounds = dict(zip(("lbx", "ubx", "lbg", "ubg"), nlp.bounds, strict=True))

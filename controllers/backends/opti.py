@@ -18,6 +18,7 @@ class OptiSolver:
     """The paper's OCP through casadi.Opti; solve(parameters, guess) like every backend."""
 
     name = "opti"
+    pure = False  # the Opti object's state between solves is CasADi's; not relied on
 
     def __init__(self, config: NMPCConfig) -> None:
         self.layout = layout = layout_for(config)

@@ -148,7 +148,13 @@ def run_scenario_kinematic(
 
     from controllers import SetPoint
     from husky_sim.sim.kinematic import run_kinematic
-    from husky_sim.sim.metrics import NO_TRACKING_FIELDS, count_reversals, judge_tracking, tracking_rmse
+    from husky_sim.sim.metrics import (
+        NO_TRACKING_FIELDS,
+        count_reversals,
+        judge_tracking,
+        solver_times,
+        tracking_rmse,
+    )
     from husky_sim.sim.outcomes import final_outcome, reference_reachable
 
     sc = resolved(scenario, horizon, gamma)
@@ -210,7 +216,8 @@ def run_scenario_kinematic(
             max_abs_omega_radps=float(np.max(np.abs(ep.controls[:, 1]))),
             safety_active_steps=ep.safety_active_steps,
             fallbacks=ep.fallbacks,
-            solve_ms_median=1000.0 * float(np.median(ep.solve_time_s)),
+            solve_ms_median=float(np.median(solver_times(1000.0 * ep.solve_time_s, ep.repeated))),
+            repeated_steps=int(np.sum(ep.repeated)),
             robot_radius_m=config.robot_radius_m,
             steps=len(ep.controls),
             t_s=ep.times_s[:-1].tolist(),

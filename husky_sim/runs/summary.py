@@ -51,7 +51,8 @@ class KinematicMetrics:
     max_abs_omega_radps: float
     safety_active_steps: int
     fallbacks: int
-    solve_ms_median: float
+    solve_ms_median: float  # over the steps that ran their solver (metrics.solver_times)
+    repeated_steps: int  # steps that ran no solver, their problems answered before
     robot_radius_m: float  # the controller's circle, the body this model's clearance is measured on
     steps: int
     t_s: list[float]

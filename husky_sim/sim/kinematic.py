@@ -54,6 +54,7 @@ class KinematicEpisode:
     min_decay_slack: np.ndarray  # (K,) smallest s_h of each solved plan
     safety_active: np.ndarray  # (K,) active obstacle constraints per step
     solve_time_s: np.ndarray  # (K,)
+    repeated: np.ndarray  # (K,) 1 where no solver ran (controllers.backends.repeats)
     fallbacks: int
     reached: bool
     time_to_goal_s: float | None
@@ -191,6 +192,7 @@ def run_kinematic(
         min_decay_slack=column("s_h_min"),
         safety_active=column("safety_active"),
         solve_time_s=column("solve_ms") / 1000.0,
+        repeated=column("repeated"),
         fallbacks=int(np.sum(column("fallback") != "none")),
         reached=monitor.goal_held,
         time_to_goal_s=monitor.reached_at if monitor.goal_held else None,

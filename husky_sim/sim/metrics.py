@@ -47,6 +47,13 @@ def count_reversals(v_cmd_mps: np.ndarray) -> tuple[int, int]:
     return int(np.sum(backwards[1:] & ~backwards[:-1]) + int(backwards[0])), int(np.sum(backwards))
 
 
+def solver_times(solve_times: np.ndarray, repeated: np.ndarray) -> np.ndarray:
+    """The solve times (in their unit) of the control steps that ran a solver: a `repeated` step's
+    answers were all looked up (controllers.backends.repeats), and its time would make a deadlock's
+    figures look fast."""
+    return np.asarray(solve_times, dtype=float)[~np.asarray(repeated, dtype=bool)]
+
+
 def tracking_rmse(errors_m: np.ndarray, t_s: np.ndarray, settle_s: float) -> float | None:
     """RMS of the position errors (m) from settle_s (s) on; None if the run ended before it."""
     settled = np.asarray(t_s) >= settle_s
@@ -153,12 +160,14 @@ class EpisodeMetrics:
     max_abs_omega_radps: float
     max_abs_linear_accel_mps2: float
     max_abs_angular_accel_radps2: float
-    solve_ms_median: float | None  # None only when no control step completed
+    # solve times over the steps that ran their solver (solver_times); None when none did
+    solve_ms_median: float | None
     solve_ms_p95: float | None
     solve_ms_p99: float | None
     solve_ms_max: float | None
     solve_budget_ms: float  # tau: a solve slower than this delivers its command late on a robot
     solves_over_budget: int  # solves that took longer than tau (wall clock)
+    repeated_steps: int  # steps that ran no solver, their problems answered before (solver_times)
     fallbacks: int
     solver_fallbacks: int  # steps whose structured solver (FATROP) failed and handed IPOPT a problem
     # of those, steps where IPOPT solved the step's first problem from the same guess: FATROP's own
@@ -223,7 +232,7 @@ def summarise(
     converged = (outcome == "reached") if is_setpoint else judgement.converged
     reversals, reverse_steps = count_reversals(col["v_cmd_mps"])
     accel = np.abs(np.diff(applied, axis=0)) / physics_dt_s if len(applied) > 1 else np.zeros((1, 2))
-    solve = col["solve_ms"].astype(float)
+    solve = solver_times(col["solve_ms"], col["repeated"])
 
     def solve_stat(percentile: float) -> float | None:  # None: no solve happened (interrupted at once)
         return float(np.percentile(solve, percentile)) if solve.size else None
@@ -251,6 +260,7 @@ def summarise(
         solve_ms_max=solve_stat(100),
         solve_budget_ms=1000.0 * tau_s,
         solves_over_budget=int(np.sum(solve > 1000.0 * tau_s)),
+        repeated_steps=int(np.sum(col["repeated"])),
         fallbacks=int(np.sum(col["fallback"] != "none")),
         solver_fallbacks=int(np.sum(col["solver_fallback"] != "")),
         solver_fallbacks_ipopt_solved=int(

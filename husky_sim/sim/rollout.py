@@ -204,6 +204,7 @@ def _solve_columns(result: ControlResult, deadline_miss: bool) -> dict[str, obje
         "status": result.status,
         "solver": result.solver,
         "solver_fallback": result.solver_fallback,
+        "repeated": int(result.repeated),
         "fallback": result.fallback,
         "recovered_by": result.recovered_by,
         "soft_constraint": int(result.soft_constraint),

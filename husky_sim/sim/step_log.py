@@ -13,7 +13,8 @@ from pathlib import Path
 #: the end of the step (`*_applied`), the smallest clearance (m) to obstacles and walls over the
 #: step's physics steps, whether the reference point at t_s was reachable (1: outside every
 #: obstacle's circle at t_s inflated by the footprint radius; outcomes.reference_reachable), and
-#: the solve's slacks, activity, status and wall time.
+#: the solve's slacks, activity, status and wall time; `repeated` is 1 where the step ran no solver,
+#: every problem it posed having been answered before, bit for bit (controllers.backends.repeats).
 LOG_COLUMNS = (
     "step",
     "t_s",
@@ -42,6 +43,7 @@ LOG_COLUMNS = (
     "status",
     "solver",
     "solver_fallback",
+    "repeated",
     "fallback",
     "recovered_by",
     "soft_constraint",

@@ -52,6 +52,7 @@ def test_a_typed_run_summary_is_written_as_its_flat_record(tmp_path: Path) -> No
         3,
         0,
         4.2,
+        0,
         0.25,
         2,
         **series,
