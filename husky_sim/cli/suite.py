@@ -54,7 +54,7 @@ def cmd_suite(args: argparse.Namespace) -> int:
         raise
     for row in rows:
         warn_solve_budget(row, f"{row.get('run_dir') or row['scenario']}: ")
-    figures = write_figures(rows, out, per_run=args.plots)
+    figures = write_figures(rows, out, per_run=args.plots, jobs=args.jobs)
     print(markdown_table(rows), end="")
     print(f"{len(figures)} figures (PNG and SVG) -> {out / 'plots'}")
     errors = [r for r in rows if r["outcome"] == "error"]

@@ -17,7 +17,7 @@ from pathlib import Path
 
 from tqdm import tqdm
 
-from husky_sim.runs.parallel import Backend, parallel_map
+from husky_sim.runs.parallel import Backend, parallel_map, process_map
 from husky_sim.runs.run_folder import RESULTS_FILE, write_results_csv
 
 #: Columns of results.md (results.csv has every summary key).
@@ -174,22 +174,39 @@ def run_suite(
     return rows
 
 
-def write_figures(rows: Sequence[dict[str, object]], out_dir: Path, per_run: bool = False) -> list[Path]:
+def write_figures(
+    rows: Sequence[dict[str, object]], out_dir: Path, per_run: bool = False, jobs: int = 1
+) -> list[Path]:
     """One comparison figure per scenario (all its PyBullet runs overlaid), the gamma x N tuning
-    maps, and with `per_run` every run's own figures (in its run directory's `plots/`)."""
+    maps, and with `per_run` every run's own figures (in its run directory's `plots/`); drawn
+    scenario by scenario on `jobs` processes (matplotlib drew the 72-run suite's figures in 16 s
+    of CPU, a fifth of the suite's wall time when done in one process after the runs)."""
+    done = [r for r in rows if r.get("run_dir") and r["outcome"] != "error"]
+    if not done:
+        return []
+    run_dirs: dict[str, list[Path]] = {str(r["scenario"]): [] for r in rows}
+    for r in done:
+        run_dirs[str(r["scenario"])].append(out_dir / str(r["run_dir"]))
+    tasks = [(scenario, dirs, out_dir, per_run) for scenario, dirs in run_dirs.items()]
+    written: list[Path] = []
+    for result in process_map(_scenario_figures, tasks, jobs):
+        if isinstance(result, BaseException):
+            raise result
+        written += result
+    return written
+
+
+def _scenario_figures(task: tuple[str, list[Path], Path, bool]) -> list[Path]:
+    """One scenario's figures (write_figures): its comparison if it has runs, its tuning maps from
+    results.csv (error rows included), and with `per_run` each run's own."""
     from husky_sim.viz.plots import plot_comparison, plot_run, plot_tuning_maps
 
-    done = [r for r in rows if r.get("run_dir") and r["outcome"] != "error"]
-    written: list[Path] = []
-    by_scenario: dict[str, list[Path]] = {}
-    for r in done:
-        by_scenario.setdefault(str(r["scenario"]), []).append(out_dir / str(r["run_dir"]))
-    for scenario, run_dirs in by_scenario.items():
-        written.append(plot_comparison(run_dirs, out_dir / "plots" / f"comparison_{scenario}")[0])
-    if done:
-        written += [png for png, _ in plot_tuning_maps(out_dir / RESULTS_FILE, out_dir / "plots").values()]
+    scenario, run_dirs, out_dir, per_run = task
+    plots = out_dir / "plots"
+    written = [plot_comparison(run_dirs, plots / f"comparison_{scenario}")[0]] if run_dirs else []
+    written += [png for png, _ in plot_tuning_maps(out_dir / RESULTS_FILE, plots, scenario).values()]
     if per_run:
-        for run_dir in (d for dirs in by_scenario.values() for d in dirs):
+        for run_dir in run_dirs:
             written += [png for png, _ in plot_run(run_dir, run_dir / "plots").values()]
     return written
 

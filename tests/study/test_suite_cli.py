@@ -26,7 +26,7 @@ from husky_sim.study.claims import (
     required_cells,
     stopped_time_s,
 )
-from husky_sim.study.suite import Cell, markdown_table, matrix, run_suite, standard_matrix
+from husky_sim.study.suite import Cell, markdown_table, matrix, run_suite, standard_matrix, write_figures
 
 pytestmark = pytest.mark.physics  # PyBullet or closed loops throughout (`make test-fast` skips)
 
@@ -89,6 +89,20 @@ def test_suite_runs_in_parallel_and_writes_results_and_figures(tmp_path: Path) -
         assert (float(r["sim_time_s"]) == pytest.approx(4.0, abs=0.01)) == ran_to_the_end, r["outcome"]
     assert "| husky_point_stabilisation | physics | bt | 5 |" in (out / "results.md").read_text()
     assert (out / "plots" / "comparison_husky_point_stabilisation.png").stat().st_size > 10_000
+
+
+def test_figures_are_drawn_scenario_by_scenario_on_worker_processes(tmp_path: Path) -> None:
+    """Each scenario's comparison and tuning maps, the same files whether drawn in this process or
+    on two workers."""
+    names = ("husky_point_stabilisation", "narrow_gap")
+    cells = [Cell(str(_short_scenario(tmp_path, name, 1.0)), "bt", 5) for name in names]
+    out = tmp_path / "suite"
+    rows = run_suite(cells, jobs=1, out_dir=out, progress=False)
+    serial = write_figures(rows, out, jobs=1)
+    assert write_figures(rows, out, jobs=2) == serial
+    expected = [[f"comparison_{name}.png", f"tuning_{name}_bt.png"] for name in names]
+    assert [p.name for p in serial] == expected[0] + expected[1]
+    assert all(p.stat().st_size > 10_000 for p in serial)
 
 
 def test_parallel_serial_and_dask_suites_agree(tmp_path: Path) -> None:
