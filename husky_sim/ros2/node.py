@@ -63,6 +63,7 @@ SERVE_LOG_COLUMNS = (
     "status",
     "fallback",
     "solver_fallback",
+    "repeated",
     "recovered_by",
     "soft_constraint",
     "guided",
@@ -82,6 +83,7 @@ CONTROLLER_COUNTS = (
     "soft_constraint_steps",
     "guided_steps",
     "safety_active_steps",
+    "repeated_steps",
 )
 
 
@@ -284,7 +286,8 @@ class ControllerNode:
             result = ControlResult.brake(1, 0, 0, time.perf_counter() - start, f"error: {exc}"[:200])
             self.stats.events[ERROR] += 1
         solve_s = time.perf_counter() - start
-        self.stats.solve_ms.append(1000.0 * solve_s)
+        if not result.repeated:  # a step answered by lookup is not a solve time (metrics.solver_times)
+            self.stats.solve_ms.append(1000.0 * solve_s)
         if solve_s > self.solve_budget_s:
             event, command = "overrun", np.zeros(2)
         elif result.fallback == "brake":
@@ -300,6 +303,7 @@ class ControllerNode:
         counts["soft_constraint_steps"] += result.soft_constraint
         counts["guided_steps"] += result.guided
         counts["safety_active_steps"] += result.safety_active > 0
+        counts["repeated_steps"] += result.repeated
         self._log_row(
             event,
             result.status,
@@ -313,6 +317,7 @@ class ControllerNode:
             obstacles=len(obstacles),
             fallback=result.fallback,
             solver_fallback=result.solver_fallback,
+            repeated=int(result.repeated),
             recovered_by=result.recovered_by,
             soft_constraint=int(result.soft_constraint),
             guided=int(result.guided),
