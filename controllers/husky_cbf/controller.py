@@ -95,12 +95,19 @@ class HuskyCBFController:
         self._soft.reset()
 
     # -- per-step preparation -------------------------------------------------------------
-    def _initial_state(self, pose: np.ndarray) -> np.ndarray:
+    @property
+    def _predicted_yaw_rate(self) -> float:
+        """The body yaw rate (rad/s) the model predicted over the last control step."""
+        return 0.5 * (self._omega_prev + self._omega_body)
+
+    def _measured_turn(self, pose: np.ndarray) -> float | None:
+        """The heading change (rad) measured over the last control step; None without one."""
+        return None if self._yaw_prev is None else float(wrap_angle(pose[2] - self._yaw_prev))
+
+    def _initial_state(self, pose: np.ndarray, measured_turn: float | None) -> np.ndarray:
         omega = self._omega_body
-        if self._yaw_prev is not None:
-            measured = float(wrap_angle(pose[2] - self._yaw_prev)) / self.tau_s
-            predicted = 0.5 * (self._omega_prev + self._omega_body)
-            omega += YAW_RATE_CORRECTION * (measured - predicted)
+        if measured_turn is not None:
+            omega += YAW_RATE_CORRECTION * (measured_turn / self.tau_s - self._predicted_yaw_rate)
         return np.array([*pose, *self._applied, omega])
 
     def _reference(
@@ -263,11 +270,11 @@ class HuskyCBFController:
             return self._brake(
                 np.full(3, np.nan), n_real, len(obstacles) - n_real, start, "invalid state", False
             )
-        yaw_rate = 0.5 * (self._omega_prev + self._omega_body)  # predicted over the last step
+        yaw_rate, turn = self._predicted_yaw_rate, self._measured_turn(pose)
         estimate = self._pose_filter.update(pose, self._applied[0], yaw_rate)
-        if self._yaw_prev is not None:
-            self._turns.update(yaw_rate * base.tau_s, float(wrap_angle(pose[2] - self._yaw_prev)))
-        z0 = self._initial_state(pose)
+        if turn is not None:
+            self._turns.update(yaw_rate * base.tau_s, turn)
+        z0 = self._initial_state(pose, turn)
         sampled = reference.sample(t, base.tau_s, base.horizon)
         now = sampled[0][0].copy()  # the reference at t, before guidance replaces it
         stationary = self._nearly_stationary(reference, float(sampled[1][0, 0]))
@@ -355,7 +362,7 @@ class HuskyCBFController:
     ) -> ControlResult:
         n = self.config.nmpc.horizon
         if np.all(np.isfinite(pose)):
-            z0 = self._initial_state(pose)
+            z0 = self._initial_state(pose, self._measured_turn(pose))
             braking = self._rollout(z0, self._accels_for(z0, np.zeros((n, 2))))
             self._advance(pose, z0[5], braking.states[1, 5], braking.states[1, 3:5].copy())
         else:
