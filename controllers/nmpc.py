@@ -3,6 +3,8 @@
 Per step: sample the reference along the horizon, predict the obstacles, warm-start IPOPT from
 the previous plan shifted by one step (s_h guess 1), solve, apply the first control.
 
+A problem that controllers.reachability proves to have no solution (a safety row no reachable
+position satisfies) is not handed to any solver: it fails at once, with the proof as its status.
 When IPOPT fails (infeasible, iteration or time limit, non-finite numbers, exception), the same
 NLP is solved again cold from the alternative guesses of controllers.recovery (braking, previous
 plan, reversing, straight line), and the first that succeeds is used and counted (`recovered_by`).
@@ -32,12 +34,15 @@ from controllers.interface import ControlResult, FallbackKind
 from controllers.model import step
 from controllers.obstacles import Obstacle, predict_obstacles
 from controllers.ocp import OCPParameters, Plan, paper_nlp, sx_problem
+from controllers.reachability import proven_infeasible
 from controllers.recovery import recovery_commands
 from controllers.references import Reference
 from controllers.signals import deliver_after_solve
 
 #: A safety constraint whose residual is at most this (m or m^2) counts as active.
 ACTIVE_TOL = 1e-4
+#: The status of a step whose problem controllers.reachability proved to have no solution.
+PROVEN_INFEASIBLE = "Proven_Infeasible"
 
 
 class NMPCController:
@@ -142,14 +147,19 @@ class NMPCController:
         p_vec, guess_vector = params.to_vector(), guess.to_vector(self._layout)
         if self.on_solve is not None:
             self.on_solve(p_vec, guess_vector)
-        with deliver_after_solve():  # an interrupt is delivered, never taken for a failed solve
-            try:
-                raw = self._run_solver(p_vec, guess_vector)
-            except Exception as exc:  # noqa: BLE001 - a control loop must survive any solver error
-                raw = RawSolution(guess_vector, False, f"exception: {exc}", -1, self.backend_name)
+        proof = proven_infeasible(self.config, params)
+        if proof:  # no solver, from no guess, can succeed: none is asked
+            self._backend.reset()  # as after a failed solve: the next solve starts cold
+            raw = RawSolution(guess_vector, False, f"{PROVEN_INFEASIBLE} ({proof})", -1)
+        else:
+            with deliver_after_solve():  # an interrupt is delivered, never taken for a failed solve
+                try:
+                    raw = self._run_solver(p_vec, guess_vector)
+                except Exception as exc:  # noqa: BLE001 - a control loop must survive any solver error
+                    raw = RawSolution(guess_vector, False, f"exception: {exc}", -1, self.backend_name)
         recovered_by = ""
         solver_fallbacks = [raw.fallback_reason]  # the first solve's, kept when a retry answers
-        if not raw.success:
+        if not raw.success and not proof:
             retry, recovered_by = self._retry(state, params, p_vec)
             raw = retry or raw
             solver_fallbacks.append(raw.fallback_reason)

@@ -43,9 +43,13 @@ def test_the_same_bytes_are_looked_up_for_one_step_more_and_then_forgotten() -> 
     assert not looked_up and solve.calls == 3
 
 
-def _deadlock() -> tuple[NMPCController, dict]:
+def _deadlock(monkeypatch: pytest.MonkeyPatch) -> tuple[NMPCController, dict]:
     """The paper's Relax-CBF, N = 5, started inside an obstacle's circle: every problem is
-    infeasible, every retry fails, the robot brakes and stands still bit for bit."""
+    infeasible, every retry fails, the robot brakes and stands still bit for bit. Reachability
+    proves these problems infeasible before any solver is asked (controllers.reachability); the
+    proof is switched off here, as for a problem it cannot decide, so that the solves are what
+    is looked up."""
+    monkeypatch.setattr("controllers.nmpc.proven_infeasible", lambda config, params: "")
     scenario = load_scenario("paper_point_stabilisation").with_overrides(horizon=5)
     config = scenario.controller_config("relax-cbf")
     problem = scenario.kinematic_problem()
@@ -60,11 +64,11 @@ def _deadlock() -> tuple[NMPCController, dict]:
     return NMPCController(config), loop
 
 
-def test_fatrop_answers_depend_on_the_problem_alone() -> None:
+def test_fatrop_answers_depend_on_the_problem_alone(monkeypatch: pytest.MonkeyPatch) -> None:
     """What makes the lookup exact: the same (parameters, guess) solved again, after other problems
     in between, gives the same bits, for an infeasible problem (FATROP's failure and IPOPT's
     verdict) and a solvable one."""
-    controller, loop = _deadlock()
+    controller, loop = _deadlock(monkeypatch)
     recorded: list[tuple[np.ndarray, np.ndarray]] = []
     controller.on_solve = lambda p, guess: recorded.append((p.copy(), guess.copy()))
     run_kinematic(controller, **{**loop, "duration_s": 0.1})
@@ -87,7 +91,7 @@ def test_fatrop_answers_depend_on_the_problem_alone() -> None:
 
 
 def test_a_deadlocked_loop_runs_the_same_with_and_without_lookups(monkeypatch: pytest.MonkeyPatch) -> None:
-    controller, loop = _deadlock()
+    controller, loop = _deadlock(monkeypatch)
     calls = {"n": 0}
     solve = FatropSolver.solve
 

@@ -1,0 +1,109 @@
+"""A proof that one control step's OCP has no solution, from where the robot can get to.
+
+The unicycle's RK4 step moves the robot by tau/6 (u(th) + 4 u(th + w tau/2) + u(th + w tau)) v,
+with u(a) the unit vector at heading a: at most |v| tau, along a heading within w tau of the
+step's start. So after k steps the heading is within k w_max tau of the measured one, and the
+position lies in p + k H_k, H_k the convex hull of the two sectors (forward to v_max tau,
+backward to |v_min| tau) of half-angle k w_max tau round the measured heading and its opposite.
+Where even the farthest of those positions from an obstacle's predicted centre breaks a safety
+row (BT: clearance >= 0; CBF: B(k) >= (1 - gamma)^k B(0); Relax-CBF: the same chain with s_h in
+[0, 1]), no decision satisfies the OCP, and no solver or initial guess can find one.
+
+A paper controller deadlocked against an obstacle (0.1 m inside its BT circle, with 0.1 m of
+travel per step) or overrun by a mover poses such a problem on step after step; each was handed to
+FATROP, IPOPT and four recovery guesses (ten solves, ~80 ms at N = 12), and every one failed.
+
+Every row may be violated by ROW_TOL in the proof, far more than any accepted solution is (FATROP's
+are checked to 1e-6, IPOPT's constraint tolerance is 1e-8), so the proof is sound for what the
+solvers return. Relax-CBF is only judged while some barrier at the measured state is <= 0: the
+structured solver loosens s_h <= 1 otherwise (controllers.ocp.redundant_bounds).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from controllers.config import NMPCConfig
+from controllers.ocp import OCPParameters
+
+#: Each constraint row (dynamics, initial state, safety) may be violated by this much (m, rad, m^2)
+#: in the proof, and bounds on s_h by this much.
+ROW_TOL = 1e-4
+
+
+def farthest_reachable(
+    state: np.ndarray, points: np.ndarray, steps: np.ndarray, config: NMPCConfig
+) -> np.ndarray:
+    """An upper bound (m) on the distance from `points` (M, 2) of any position the robot can reach
+    from `state` [x m, y m, theta rad] in `steps` (M,) control steps, each row of the trajectory
+    allowed ROW_TOL."""
+    tau, w = config.tau_s, config.omega_max_radps
+    k = steps.astype(float)
+    offset = state[:2] - points
+    here = np.hypot(offset[..., 0], offset[..., 1])
+    away = np.arctan2(offset[..., 1], offset[..., 0])  # the heading that increases the distance
+    half_angle = k * (w * tau + ROW_TOL)
+    best = here
+    for reach_mps, heading in ((config.v_max_mps, state[2]), (-config.v_min_mps, state[2] + math.pi)):
+        if reach_mps <= 0:
+            continue
+        radius = k * reach_mps * tau
+        turn = np.angle(np.exp(1j * (away - heading)))
+        toward = heading + np.clip(turn, -half_angle, half_angle)  # the arc point nearest `away`
+        arc = np.hypot(offset[..., 0] + radius * np.cos(toward), offset[..., 1] + radius * np.sin(toward))
+        best = np.maximum(best, np.where(half_angle >= math.pi / 2, here + radius, arc))
+    return best + (k + 1) * math.sqrt(2.0) * ROW_TOL
+
+
+def proven_infeasible(config: NMPCConfig, params: OCPParameters) -> str:
+    """Why no decision can satisfy this step's safety rows (the first obstacle slot and step that
+    prove it), or "" where reachability proves nothing."""
+    safety = config.safety
+    if safety == "none" or config.obstacle_slots == 0:
+        return ""
+    n = config.horizon
+    steps = np.arange(1, n + 1)
+    centres = np.asarray(params.obstacle_centres, dtype=float)  # (slots, N+1, 2)
+    r_sum = config.robot_radius_m + np.asarray(params.obstacle_radii, dtype=float)  # (slots,)
+    state = np.asarray(params.feedback, dtype=float)
+    offset = state[:2] - centres
+    distance = np.hypot(offset[..., 0], offset[..., 1])  # (slots, N+1) from the measured position
+    needed = _least_distance(config, distance[:, 0], r_sum, steps)  # (slots, N)
+    if needed is None:
+        return ""
+    # staying put is reachable: only a row the measured position breaks can be out of reach
+    slots, before = np.nonzero(distance[:, 1:] < needed)
+    if slots.size == 0:
+        return ""
+    farthest = farthest_reachable(state, centres[slots, before + 1], before + 1, config)
+    broken = np.flatnonzero(farthest < needed[slots, before])
+    if broken.size == 0:
+        return ""
+    slot, k = slots[broken[0]], before[broken[0]] + 1
+    return f"{safety} row of obstacle slot {slot} at step {k} out of reach"
+
+
+def _least_distance(
+    config: NMPCConfig, now_m: np.ndarray, r_sum_m: np.ndarray, steps: np.ndarray
+) -> np.ndarray | None:
+    """The least distance (m) from obstacle slot i's predicted centre at step k = 1..N that its
+    safety rows allow (slots, N), given its distance now; None where the proof does not apply."""
+    if config.safety == "bt":  # clearance(k) >= -ROW_TOL
+        return np.broadcast_to((r_sum_m - ROW_TOL)[:, None], (len(r_sum_m), len(steps)))
+    if config.safety == "relax-cbf" and np.min(now_m**2 - r_sum_m**2) > 0:
+        return None  # every barrier positive: the structured solver lets s_h exceed 1
+    # B(0) at the decision's x_0, within ROW_TOL of the measured state
+    b0 = np.maximum(now_m - math.sqrt(2.0) * ROW_TOL, 0.0) ** 2 - r_sum_m**2
+    decay = 1.0 - config.gamma
+    if config.safety == "cbf":  # B(k) >= decay B(k-1) - ROW_TOL
+        lowest = decay**steps * b0[:, None] - steps * ROW_TOL
+    else:  # relax-cbf: B(k) >= s_h decay B(k-1) - ROW_TOL, weakest at s_h = 0 or at its bound
+        lowest = np.empty((len(b0), len(steps)))
+        level = b0
+        for k in range(len(steps)):
+            level = (1.0 + ROW_TOL) * decay * np.minimum(level, 0.0) - ROW_TOL
+            lowest[:, k] = level
+    # B = d^2 - r^2 >= lowest  <=>  d >= sqrt(lowest + r^2) (any d >= 0 where that is negative)
+    return np.sqrt(np.maximum(lowest + r_sum_m[:, None] ** 2, 0.0))
