@@ -42,18 +42,21 @@ def farthest_reachable(
     tau, w = config.tau_s, config.omega_max_radps
     k = steps.astype(float)
     offset = state[:2] - points
-    here = np.hypot(offset[..., 0], offset[..., 1])
-    away = np.arctan2(offset[..., 1], offset[..., 0])  # the heading that increases the distance
+    here = np.hypot(offset[:, 0], offset[:, 1])
+    away = np.arctan2(offset[:, 1], offset[:, 0])  # the heading that increases the distance
     half_angle = k * (w * tau + ROW_TOL)
+    wide = half_angle >= math.pi / 2  # the sectors' hull is then a disc
     best = here
     for reach_mps, heading in ((config.v_max_mps, state[2]), (-config.v_min_mps, state[2] + math.pi)):
         if reach_mps <= 0:
             continue
         radius = k * reach_mps * tau
-        turn = np.angle(np.exp(1j * (away - heading)))
-        toward = heading + np.clip(turn, -half_angle, half_angle)  # the arc point nearest `away`
-        arc = np.hypot(offset[..., 0] + radius * np.cos(toward), offset[..., 1] + radius * np.sin(toward))
-        best = np.maximum(best, np.where(half_angle >= math.pi / 2, here + radius, arc))
+        turn = np.remainder(away - heading + math.pi, 2 * math.pi) - math.pi
+        toward = heading + np.minimum(np.maximum(turn, -half_angle), half_angle)  # arc point nearest `away`
+        arc = np.hypot(offset[:, 0] + radius * np.cos(toward), offset[:, 1] + radius * np.sin(toward))
+        if wide.any():
+            arc = np.where(wide, here + radius, arc)
+        best = np.maximum(best, arc)
     return best + (k + 1) * math.sqrt(2.0) * ROW_TOL
 
 
