@@ -11,12 +11,14 @@ row (BT: clearance >= 0; CBF: B(k) >= (1 - gamma)^k B(0); Relax-CBF: the same ch
 
 A paper controller deadlocked against an obstacle (0.1 m inside its BT circle, with 0.1 m of
 travel per step) or overrun by a mover poses such a problem on step after step; each was handed to
-FATROP, IPOPT and four recovery guesses (ten solves, ~80 ms at N = 12), and every one failed.
+FATROP, IPOPT and up to four recovery guesses (up to ten solves, ~80 ms at N = 12), all failing.
 
-Every row may be violated by ROW_TOL in the proof, far more than any accepted solution is (FATROP's
-are checked to 1e-6, IPOPT's constraint tolerance is 1e-8), so the proof is sound for what the
-solvers return. Relax-CBF is only judged while some barrier at the measured state is <= 0: the
-structured solver loosens s_h <= 1 otherwise (controllers.ocp.redundant_bounds).
+Every row may be violated by ROW_TOL in the proof, at least 50 times more than an accepted solution:
+FATROP's answers are checked to 1e-6, and IPOPT stops at an error of 1e-6 on its scaled problem,
+which scales no row used here down by more than half (a barrier row's gradient, twice the distance,
+reaches 200 only for a parked slot 100 m away; IPOPT scales rows whose gradient exceeds 100).
+Relax-CBF is only judged while some barrier at the measured state is <= 0: the structured solver
+loosens s_h <= 1 otherwise (controllers.ocp.redundant_bounds).
 """
 
 from __future__ import annotations
