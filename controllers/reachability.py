@@ -33,6 +33,9 @@ from controllers.ocp import OCPParameters
 #: Each constraint row (dynamics, initial state, safety) may be violated by this much (m, rad, m^2)
 #: in the proof, and bounds on s_h by this much.
 ROW_TOL = 1e-4
+#: (radial, angular) cells over the positions one control step can reach, for first_step_covered:
+#: a cell is 3 mm by at most 2 mm at 1 m/s, tau = 0.1 s and pi/4 rad/s.
+COVER_CELLS = (64, 8)
 
 
 def farthest_reachable(
@@ -78,16 +81,56 @@ def proven_infeasible(config: NMPCConfig, params: OCPParameters) -> str:
     needed = _least_distance(config, distance[:, 0], r_sum, steps)  # (slots, N)
     if needed is None:
         return ""
-    # staying put is reachable: only a row the measured position breaks can be out of reach
+    # no reachable point is nearer the farthest one than the measured position: only a row the
+    # measured position breaks can be out of reach
     slots, before = np.nonzero(distance[:, 1:] < needed)
     if slots.size == 0:
         return ""
     farthest = farthest_reachable(state, centres[slots, before + 1], before + 1, config)
     broken = np.flatnonzero(farthest < needed[slots, before])
-    if broken.size == 0:
-        return ""
-    slot, k = slots[broken[0]], before[broken[0]] + 1
-    return f"{safety} row of obstacle slot {slot} at step {k} out of reach"
+    if broken.size:
+        slot, k = slots[broken[0]], before[broken[0]] + 1
+        return f"{safety} row of obstacle slot {slot} at step {k} out of reach"
+    together = first_step_covered(state, centres[:, 1], needed[:, 0], config)
+    if together:
+        return (
+            f"{safety} rows of obstacle slots {', '.join(map(str, together))} at step 1 out of reach together"
+        )
+    return ""
+
+
+def first_step_covered(
+    state: np.ndarray, centres: np.ndarray, needed_m: np.ndarray, config: NMPCConfig
+) -> list[int]:
+    """The obstacle slots whose discs (centres (slots, 2) at step 1, radii needed_m) cover every
+    position one control step can reach (a squeeze between obstacles that each alone could be
+    escaped), or [] where some position may be free.
+
+    One step is a single control: the robot moves by rho u(theta + phi), rho in [v_min tau, v_max tau]
+    (0 included), |phi| <= w_max tau. The (rho, phi) box is cut into COVER_CELLS cells; a cell whose
+    every point (its centre, plus the distance any of its points can lie from it) is nearer some
+    obstacle's centre than that obstacle's rows allow is covered."""
+    tau = config.tau_s
+    low, high = min(config.v_min_mps, 0.0) * tau, max(config.v_max_mps, 0.0) * tau
+    half_angle = config.omega_max_radps * tau + ROW_TOL
+    # the measured position lies in the box (rho = 0): where it is free, nothing is covered
+    here = np.hypot(*(state[:2] - centres).T)
+    if np.all(here >= needed_m):
+        return []
+    radial, angular = COVER_CELLS
+    rho = low + (np.arange(radial) + 0.5) * (high - low) / radial
+    phi = -half_angle + (np.arange(angular) + 0.5) * 2.0 * half_angle / angular
+    rho, phi = (a.ravel() for a in np.meshgrid(rho, phi, indexing="ij"))
+    heading = state[2] + phi
+    cells = state[:2] + np.column_stack([rho * np.cos(heading), rho * np.sin(heading)])
+    # any point rho' u(theta + phi') of a cell lies within |rho' - rho| + |rho| |phi' - phi| of its
+    # centre; x_0 and x_1 may each be ROW_TOL off per coordinate
+    spread = (high - low) / (2 * radial) + np.abs(rho) * half_angle / angular + 2 * math.sqrt(2.0) * ROW_TOL
+    offset = cells[:, None, :] - centres[None, :, :]
+    inside = np.hypot(offset[..., 0], offset[..., 1]) + spread[:, None] < needed_m[None, :]  # (cells, slots)
+    if not np.all(inside.any(axis=1)):
+        return []
+    return [int(i) for i in np.flatnonzero(inside.any(axis=0))]
 
 
 def _least_distance(

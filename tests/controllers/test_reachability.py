@@ -45,9 +45,10 @@ def test_a_trajectory_that_meets_every_row_is_never_proven_infeasible(
     gamma: float,
     seed: int,
 ) -> None:
-    """A random control sequence (often on its bounds) driven through the model's own RK4, and an
-    obstacle (moving at constant velocity) sized so that the trajectory meets its safety rows
-    with equality somewhere: a solution exists, at the edge of the feasible set."""
+    """A random control sequence (often on its bounds) driven through the model's own RK4, and two
+    obstacles (one behind the trajectory or anywhere, one beside it; moving at constant velocity)
+    each sized so that the trajectory meets its safety rows with equality somewhere: a solution
+    exists, at the edge of the feasible set."""
     rng = np.random.default_rng(seed)
     state = np.array([*rng.uniform(-2, 2, 2), rng.uniform(-math.pi, math.pi)])
     controls = np.column_stack(
@@ -70,16 +71,18 @@ def test_a_trajectory_that_meets_every_row_is_never_proven_infeasible(
         end = positions[rng.integers(1, horizon + 1)]
         away = math.atan2(*(end - positions[0])[::-1]) + rng.uniform(-0.3, 0.3)
         behind = end - rng.uniform(0.3, 3.0) * np.array([math.cos(away), math.sin(away)])
-        centres = np.tile(behind, (horizon + 1, 1))
+        first = np.tile(behind, (horizon + 1, 1))
     else:
-        centres = rng.uniform(-2, 2, 2) + rng.uniform(-1, 1, 2) * tau_s * np.arange(horizon + 1)[:, None]
-    distances = np.hypot(*(positions - centres).T)
-    if safety == "bt":
-        r_sum = float(np.min(distances[1:]))
-    else:  # B(k+1) - (1 - gamma) B(k) = d(k+1)^2 - (1 - gamma) d(k)^2 - gamma r^2 >= 0, s_h = 1
-        r_sq = float(np.min(distances[1:] ** 2 - (1 - gamma) * distances[:-1] ** 2)) / gamma
-        assume(r_sq > 1e-4)
-        r_sum = math.sqrt(r_sq)
+        first = rng.uniform(-2, 2, 2) + rng.uniform(-1, 1, 2) * tau_s * np.arange(horizon + 1)[:, None]
+    # a second obstacle beside the trajectory at some step, moving: the two may squeeze it
+    k = rng.integers(0, horizon + 1)
+    side = rng.uniform(-math.pi, math.pi)
+    second = positions[k] + rng.uniform(0.3, 1.5) * np.array([math.cos(side), math.sin(side)])
+    second = second + rng.uniform(-1, 1, 2) * tau_s * (np.arange(horizon + 1) - k)[:, None]
+    centres = np.stack([first, second])
+    r_sum = np.array([_touching(positions, c, safety, gamma) for c in centres])
+    assume(np.all(r_sum > 1e-2))
+    robot_radius = 0.5 * float(np.min(r_sum))
     config = NMPCConfig(
         safety=safety,
         horizon=horizon,
@@ -88,28 +91,56 @@ def test_a_trajectory_that_meets_every_row_is_never_proven_infeasible(
         v_max_mps=v_max,
         omega_max_radps=omega_max,
         gamma=gamma,
-        robot_radius_m=0.5 * r_sum,
+        robot_radius_m=robot_radius,
+        obstacle_slots=2,
     )
-    assert proven_infeasible(config, _parameters(state, centres, 0.5 * r_sum)) == ""
+    params = OCPParameters(
+        state, np.zeros((horizon + 1, 3)), np.zeros((horizon, 2)), centres, r_sum - robot_radius
+    )
+    assert proven_infeasible(config, params) == ""
+
+
+def _touching(positions: np.ndarray, centres: np.ndarray, safety: str, gamma: float) -> float:
+    """The radii sum (m) at which the trajectory meets the obstacle's rows with equality somewhere
+    (0 where no positive one lets it meet them)."""
+    distances = np.hypot(*(positions - centres).T)
+    if safety == "bt":
+        return float(np.min(distances[1:]))
+    # B(k+1) - (1 - gamma) B(k) = d(k+1)^2 - (1 - gamma) d(k)^2 - gamma r^2 >= 0 (s_h = 1)
+    r_sq = float(np.min(distances[1:] ** 2 - (1 - gamma) * distances[:-1] ** 2)) / gamma
+    return math.sqrt(r_sq) if r_sq > 0 else 0.0
 
 
 @pytest.mark.parametrize(
-    ("case", "safety", "obstacle"),
+    ("case", "safety", "obstacles", "proof"),
     [
         # 0.14 m inside a static obstacle's BT circle, facing it: 0.1 m of travel per step
-        ("deadlock", "bt", Obstacle(0.61, 0.0, 0.5)),
+        ("deadlock", "bt", [Obstacle(0.61, 0.0, 0.5)], "bt row of obstacle slot 0 at step 1 out of reach"),
         # facing along y, 0.05 m inside a circle on its left: the way out is sideways, which the
         # unicycle cannot take in one step (a disc of reach 0.1 m would not prove it)
-        ("sideways", "bt", Obstacle(-0.95, 0.0, 0.75)),
+        ("sideways", "bt", [Obstacle(-0.95, 0.0, 0.75)], "bt row of obstacle slot 0 at step 1 out of reach"),
         # a mover closing at 3 m/s, faster than the robot can reverse (1 m/s): B must fall by more
         # than the CBF's 10 % per step
-        ("overrun", "cbf", Obstacle(1.2, 0.0, 0.3, -3.0, 0.0)),
+        (
+            "overrun",
+            "cbf",
+            [Obstacle(1.2, 0.0, 0.3, -3.0, 0.0)],
+            "cbf row of obstacle slot 0 at step 1 out of reach",
+        ),
+        # 0.02 m inside two circles, one ahead and one behind: either alone is left by driving
+        # away from it, but leaving one means going deeper into the other
+        (
+            "squeeze",
+            "bt",
+            [Obstacle(0.73, 0.0, 0.5), Obstacle(-0.73, 0.0, 0.5)],
+            "bt rows of obstacle slots 0, 1 at step 1 out of reach together",
+        ),
     ],
 )
 def test_where_the_proof_speaks_every_solver_fails_and_the_loop_does_the_same(
-    case: str, safety: str, obstacle: Obstacle, monkeypatch: pytest.MonkeyPatch
+    case: str, safety: str, obstacles: list[Obstacle], proof: str, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    config = NMPCConfig(safety=safety, horizon=5, gamma=0.1)
+    config = NMPCConfig(safety=safety, horizon=5, gamma=0.1, obstacle_slots=len(obstacles))
     heading = math.pi / 2 if case == "sideways" else 0.0
     state = np.array([0.0, 0.0, heading])
     goal = SetPoint(3.0, 0.0, 0.0)
@@ -122,13 +153,13 @@ def test_where_the_proof_speaks_every_solver_fails_and_the_loop_does_the_same(
         return solve(self, parameters, guess)
 
     monkeypatch.setattr(FatropSolver, "solve", counted)
-    answer = proven.solve(state, goal, [obstacle], 0.0)
-    assert answer.status.startswith(PROVEN_INFEASIBLE) and f"{safety} row" in answer.status
+    answer = proven.solve(state, goal, obstacles, 0.0)
+    assert answer.status == f"{PROVEN_INFEASIBLE} ({proof})"
     assert calls["n"] == 0 and answer.iterations == -1 and not answer.success and answer.fallback == "brake"
     # the same problem put to FATROP, IPOPT and every recovery guess: all of them fail
     monkeypatch.setattr("controllers.nmpc.proven_infeasible", lambda config, params: "")
     asked = NMPCController(config)
-    solved = asked.solve(state, goal, [obstacle], 0.0)
+    solved = asked.solve(state, goal, obstacles, 0.0)
     # the first guess, then the reverse and straight ones (the brake guess is the first again)
     assert calls["n"] == 3 and not solved.success and solved.recovered_by == ""
     assert "fatrop: " in solved.solver_fallback  # IPOPT was asked too, and failed
