@@ -1,12 +1,12 @@
 """Generate a CasADi Function (a whole solver included) as C, compile it once, load it.
 
-The shared library is cached in a user cache directory under a key that hashes the generated C
-source, the CasADi version and the compiler command, so a problem is compiled once per
-configuration and machine, and every process (suite and sweep workers) loads the same file. A
-file lock makes concurrent workers wait for the one that compiles instead of compiling too.
-Without a C compiler, or when compiling fails, the uncompiled Function is used and one warning
-says so; it is slower, and for FATROP the exit flag is then not visible, so its acceptable exits
-go to IPOPT (controllers.backends.fatrop).
+The shared library is cached in a user cache directory under a key that hashes the Function as
+CasADi serialises it, the status shim, the CasADi version and the compiler command, so a problem is
+compiled once per configuration and machine, and every process (suite and sweep workers) loads the
+same file. A file lock makes concurrent workers wait for the one that compiles instead of compiling
+too. Without a C compiler, or when compiling fails, the uncompiled Function is used and one warning
+says so; it is slower, and for FATROP the exit flag is then not visible, so its acceptable exits go
+to IPOPT (controllers.backends.fatrop).
 
 A FATROP solver is compiled with a status shim (FATROP_STATUS_SHIM): its call of
 `fatrop_ocp_c_solve` goes through a wrapper that keeps FATROP's own return flag and iteration
@@ -146,32 +146,33 @@ def _build(compiler: str, sources: list[Path], target: Path) -> str:
 def compiled_library(function: ca.Function) -> Path | None:
     """The shared library of `function` (compiled once, cached), or None when it cannot be built."""
     name = function.name()
-    with tempfile.TemporaryDirectory(prefix="husky-sim-codegen-") as tmp:
-        sources = _generate(function, tmp)
-        key_material = b"".join(s.read_bytes() for s in sources)
-        # the library links CasADi's FATROP by its path (rpath), so the path is part of the key
-        key_material += ca.__version__.encode() + str(Path(ca.__file__).parent).encode()
-        key_material += " ".join((*C_FLAGS, _SHIM_DEFINE)).encode()
-        key = hashlib.sha256(key_material).hexdigest()[:24]
-        directory = cache_dir()
-        target = directory / f"{name}_{key}.so"
-        if target.exists() and not _loads(target):
-            target.unlink(missing_ok=True)  # a damaged cache entry is rebuilt, never trusted
-        if not target.exists():
-            compiler = _compiler()
-            if compiler is None:
-                _warn_once("no C compiler found (cc, gcc or $CC): NMPC solvers run uncompiled, slower")
-                return None
-            directory.mkdir(parents=True, exist_ok=True)
-            with open(directory / f"{name}_{key}.lock", "w") as lock:
-                fcntl.flock(lock, fcntl.LOCK_EX)  # one process compiles, the others wait and load
-                if not target.exists():
-                    failure = _build(compiler, sources, target)
-                    if not failure and not _loads(target):
-                        failure = "the compiled library does not load"
-                    if failure:
-                        _warn_once(f"compiling the NMPC solver failed ({failure}); it runs uncompiled")
-                        return None
+    # the key: the Function as CasADi serialises it (the same for the same problem built again, in
+    # any process), which is 5 times cheaper than generating its C; that is only done to compile
+    key_material = function.serialize().encode() + FATROP_STATUS_SHIM.encode()
+    # the library links CasADi's FATROP by its path (rpath), so the path is part of the key
+    key_material += ca.__version__.encode() + str(Path(ca.__file__).parent).encode()
+    key_material += " ".join((*C_FLAGS, _SHIM_DEFINE)).encode()
+    key = hashlib.sha256(key_material).hexdigest()[:24]
+    directory = cache_dir()
+    target = directory / f"{name}_{key}.so"
+    if target.exists() and not _loads(target):
+        target.unlink(missing_ok=True)  # a damaged cache entry is rebuilt, never trusted
+    if not target.exists():
+        compiler = _compiler()
+        if compiler is None:
+            _warn_once("no C compiler found (cc, gcc or $CC): NMPC solvers run uncompiled, slower")
+            return None
+        directory.mkdir(parents=True, exist_ok=True)
+        with open(directory / f"{name}_{key}.lock", "w") as lock:
+            fcntl.flock(lock, fcntl.LOCK_EX)  # one process compiles, the others wait and load
+            if not target.exists():
+                with tempfile.TemporaryDirectory(prefix="husky-sim-codegen-") as tmp:
+                    failure = _build(compiler, _generate(function, tmp), target)
+                if not failure and not _loads(target):
+                    failure = "the compiled library does not load"
+                if failure:
+                    _warn_once(f"compiling the NMPC solver failed ({failure}); it runs uncompiled")
+                    return None
     return target
 
 
