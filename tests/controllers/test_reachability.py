@@ -11,8 +11,6 @@ from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
 from controllers import NMPCConfig, NMPCController, Obstacle, SetPoint
-from controllers.backends import FatropSolver
-from controllers.backends.nlp import RawSolution
 from controllers.model import step
 from controllers.nmpc import PROVEN_INFEASIBLE
 from controllers.ocp import OCPParameters
@@ -138,21 +136,19 @@ def _touching(positions: np.ndarray, centres: np.ndarray, safety: str, gamma: fl
     ],
 )
 def test_where_the_proof_speaks_every_solver_fails_and_the_loop_does_the_same(
-    case: str, safety: str, obstacles: list[Obstacle], proof: str, monkeypatch: pytest.MonkeyPatch
+    case: str,
+    safety: str,
+    obstacles: list[Obstacle],
+    proof: str,
+    monkeypatch: pytest.MonkeyPatch,
+    fatrop_solves: dict[str, int],
 ) -> None:
     config = NMPCConfig(safety=safety, horizon=5, gamma=0.1, obstacle_slots=len(obstacles))
     heading = math.pi / 2 if case == "sideways" else 0.0
     state = np.array([0.0, 0.0, heading])
     goal = SetPoint(3.0, 0.0, 0.0)
     proven = NMPCController(config)
-    calls = {"n": 0}
-    solve = FatropSolver.solve
-
-    def counted(self: FatropSolver, parameters: np.ndarray, guess: np.ndarray) -> RawSolution:
-        calls["n"] += 1
-        return solve(self, parameters, guess)
-
-    monkeypatch.setattr(FatropSolver, "solve", counted)
+    calls = fatrop_solves
     answer = proven.solve(state, goal, obstacles, 0.0)
     assert answer.status == f"{PROVEN_INFEASIBLE} ({proof})"
     assert calls["n"] == 0 and answer.iterations == -1 and not answer.success and answer.fallback == "brake"

@@ -90,16 +90,11 @@ def test_fatrop_answers_depend_on_the_problem_alone(monkeypatch: pytest.MonkeyPa
         )
 
 
-def test_a_deadlocked_loop_runs_the_same_with_and_without_lookups(monkeypatch: pytest.MonkeyPatch) -> None:
+def test_a_deadlocked_loop_runs_the_same_with_and_without_lookups(
+    monkeypatch: pytest.MonkeyPatch, fatrop_solves: dict[str, int]
+) -> None:
     controller, loop = _deadlock(monkeypatch)
-    calls = {"n": 0}
-    solve = FatropSolver.solve
-
-    def counted(self: FatropSolver, parameters: np.ndarray, guess: np.ndarray) -> RawSolution:
-        calls["n"] += 1
-        return solve(self, parameters, guess)
-
-    monkeypatch.setattr(FatropSolver, "solve", counted)
+    calls = fatrop_solves
     looked_up = run_kinematic(controller, **loop)
     with_lookups = calls["n"]
     monkeypatch.setattr(FatropSolver, "pure", False)  # the controller then solves every problem
