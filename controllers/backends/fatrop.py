@@ -171,7 +171,7 @@ class FatropSolver:
         # fallback_max_iter caps the fallback IPOPT (default: options.max_iter), for a caller whose
         # own next step after a failure is cheaper than IPOPT's full verdict (husky-cbf's hard problem)
         fallback = options if fallback_max_iter is None else replace(options, max_iter=fallback_max_iter)
-        self._reference = IpoptSolver(nlp, fallback)
+        self._reference = IpoptSolver(nlp, fallback, warm_start=False)
 
     def reset(self) -> None:
         """Nothing is carried between solves but the guess."""

@@ -47,16 +47,22 @@ class IpoptSolver:
 
     Two solvers share the NLP: a cold one (IPOPT defaults) for the first solve and after a
     failure or `reset`, and a warm one seeded with the last successful solve's multipliers.
+    `warm_start=False` builds the cold one only (the structured solver's fallback, which always
+    starts cold, so that its answer depends on the problem alone).
     """
 
     name = "ipopt"
     pure = False  # a solve after a success is warm-started from its multipliers
 
-    def __init__(self, nlp: NLP, options: SolverOptions) -> None:
+    def __init__(self, nlp: NLP, options: SolverOptions, warm_start: bool = True) -> None:
         self._bounds = dict(zip(("lbx", "ubx", "lbg", "ubg"), nlp.bounds, strict=True))
         ipopt = ipopt_options(options)
         self._cold = ca.nlpsol(f"{nlp.name}_cold", "ipopt", nlp.problem, ipopt)
-        self._warm = ca.nlpsol(f"{nlp.name}_warm", "ipopt", nlp.problem, {**ipopt, **WARM_START_OPTIONS})
+        self._warm = (
+            ca.nlpsol(f"{nlp.name}_warm", "ipopt", nlp.problem, {**ipopt, **WARM_START_OPTIONS})
+            if warm_start
+            else None
+        )
         self._multipliers: dict[str, ca.DM] | None = None
 
     def reset(self) -> None:
@@ -71,5 +77,6 @@ class IpoptSolver:
             out = solver(x0=guess, p=parameters, **self._bounds, **self._multipliers)
         decision = np.asarray(out["x"], dtype=float).reshape(-1)
         result = from_stats(decision, solver.stats(), self.name)
-        self._multipliers = {"lam_x0": out["lam_x"], "lam_g0": out["lam_g"]} if result.success else None
+        warm = result.success and self._warm is not None
+        self._multipliers = {"lam_x0": out["lam_x"], "lam_g0": out["lam_g"]} if warm else None
         return result
