@@ -91,7 +91,11 @@ def proven_infeasible(config: NMPCConfig, params: OCPParameters) -> str:
     if broken.size:
         slot, k = slots[broken[0]], before[broken[0]] + 1
         return f"{safety} row of obstacle slot {slot} at step {k} out of reach"
-    together = first_step_covered(state, centres[:, 1], needed[:, 0], config)
+    # the measured position is one of the positions one step reaches: where it keeps every
+    # step-1 row, nothing is covered
+    together = np.any(distance[:, 1] < needed[:, 0]) and first_step_covered(
+        state, centres[:, 1], needed[:, 0], config
+    )
     if together:
         return (
             f"{safety} rows of obstacle slots {', '.join(map(str, together))} at step 1 out of reach together"
@@ -113,10 +117,6 @@ def first_step_covered(
     tau = config.tau_s
     low, high = min(config.v_min_mps, 0.0) * tau, max(config.v_max_mps, 0.0) * tau
     half_angle = config.omega_max_radps * tau + ROW_TOL
-    # the measured position lies in the box (rho = 0): where it is free, nothing is covered
-    here = np.hypot(*(state[:2] - centres).T)
-    if np.all(here >= needed_m):
-        return []
     radial, angular = COVER_CELLS
     rho = low + (np.arange(radial) + 0.5) * (high - low) / radial
     phi = -half_angle + (np.arange(angular) + 0.5) * 2.0 * half_angle / angular
