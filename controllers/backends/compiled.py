@@ -14,11 +14,16 @@ count (read with `FatropStatus`) and returns 0 unless FATROP raised, so the iter
 written out and the caller, not CasADi's collapsed 0/1 status, decides what to accept.
 
 Cache directory: $HUSKY_SIM_SOLVER_CACHE, else $XDG_CACHE_HOME/husky-nav-sim/solvers, else
-~/.cache/husky-nav-sim/solvers.
+~/.cache/husky-nav-sim/solvers. Every problem, and every change to how one is built, is a new
+library of about 0.3 MB (1204 of them, 366 MB, after a few weeks of this project's development):
+a library is marked used (its mtime) each time it is looked up, and after each compile the ones
+unused for CACHE_MAX_AGE_DAYS are deleted. A working set of any size is kept; a key compiled
+again after a month costs one compile.
 """
 
 from __future__ import annotations
 
+import contextlib
 import ctypes
 import fcntl
 import hashlib
@@ -26,6 +31,7 @@ import os
 import shutil
 import subprocess
 import tempfile
+import time
 import warnings
 from pathlib import Path
 
@@ -39,6 +45,9 @@ C_FLAGS = ("-O1", "-shared", "-fPIC")
 #: A compile that takes longer is abandoned (the solver then runs uncompiled); the largest
 #: problem here (husky-cbf N = 12, soft) compiles in about 16 s.
 COMPILE_TIMEOUT_S = 600.0
+
+#: A cached library unused for longer is deleted after the next compile (prune_cache).
+CACHE_MAX_AGE_DAYS = 30.0
 
 _warned: set[str] = set()
 
@@ -155,6 +164,9 @@ def compiled_library(function: ca.Function) -> Path | None:
     key = hashlib.sha256(key_material).hexdigest()[:24]
     directory = cache_dir()
     target = directory / f"{name}_{key}.so"
+    # marked used before it is looked for: a prune_cache in another process either sees the new
+    # mtime and keeps it, or has deleted it already and it is compiled again here
+    _mark_used(target)
     if target.exists() and not _loads(target):
         target.unlink(missing_ok=True)  # a damaged cache entry is rebuilt, never trusted
     if not target.exists():
@@ -173,7 +185,40 @@ def compiled_library(function: ca.Function) -> Path | None:
                 if failure:
                     _warn_once(f"compiling the NMPC solver failed ({failure}); it runs uncompiled")
                     return None
+        prune_cache(directory)
     return target
+
+
+def _mark_used(library: Path) -> None:
+    """Set the library's mtime to now: the cache's record of its last use (prune_cache)."""
+    with contextlib.suppress(OSError):  # missing, or a read-only shared cache (never pruned)
+        os.utime(library)
+
+
+def prune_cache(directory: Path, max_age_days: float = CACHE_MAX_AGE_DAYS) -> list[Path]:
+    """Delete the libraries in `directory` unused (by mtime) for more than max_age_days, each with
+    its lock file when no process holds that lock; return the libraries deleted. A process that
+    has one loaded keeps its mapping."""
+    cutoff = time.time() - max_age_days * 86400.0
+    deleted = []
+    for library in sorted(directory.glob("*.so")):
+        try:
+            if library.stat().st_mtime >= cutoff:
+                continue
+            lock_path = library.with_suffix(".lock")
+            with open(lock_path, "a") as lock:
+                try:
+                    fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
+                except BlockingIOError:
+                    continue  # being compiled or waited on now
+                if library.stat().st_mtime >= cutoff:  # looked up since
+                    continue
+                library.unlink()
+                lock_path.unlink()
+            deleted.append(library)
+        except OSError:  # deleted by another process meanwhile, or a read-only cache
+            continue
+    return deleted
 
 
 def _loads(library: Path) -> bool:

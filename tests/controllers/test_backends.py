@@ -1,8 +1,11 @@
 """Solver backends: the stage-wise transcription is the same OCP, FATROP's answers match IPOPT's,
 its failures fall back to IPOPT and are reported, and compiled solvers are cached and reused."""
 
+import fcntl
 import math
+import os
 import re
+import time
 import warnings
 from pathlib import Path
 
@@ -199,6 +202,30 @@ def test_compiled_solver_is_cached_and_reused(tmp_path: Path, monkeypatch: pytes
         again = compiled(function)
     assert float(again([0.3, -0.2])) == pytest.approx(float(function([0.3, -0.2])), abs=1e-15)
     assert float(first([1.0, 2.0])) == pytest.approx(float(function([1.0, 2.0])), abs=1e-15)
+
+
+def test_the_cache_forgets_libraries_unused_for_a_month(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """After a compile, libraries unused for CACHE_MAX_AGE_DAYS go with their locks; a lookup
+    marks a library used, so a library in use is never pruned, and a locked one is left."""
+    monkeypatch.setenv("HUSKY_SIM_SOLVER_CACHE", str(tmp_path))
+    x = ca.SX.sym("x")
+    old, kept = ca.Function("prune_old", [x], [x + 1]), ca.Function("prune_kept", [x], [x + 2])
+    compiled(old), compiled(kept)
+    month_ago = time.time() - (compiled_module.CACHE_MAX_AGE_DAYS + 1) * 86400
+    for library in tmp_path.glob("*.so"):
+        os.utime(library, (month_ago, month_ago))
+    compiled(kept)  # a cache hit: marked used now
+    busy = tmp_path / "prune_busy_0.so"
+    busy.write_bytes(b"")
+    os.utime(busy, (month_ago, month_ago))
+    with open(busy.with_suffix(".lock"), "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)  # another process compiling it now
+        compiled(ca.Function("prune_new", [x], [x + 3]))  # a compile prunes
+    names = sorted(p.name.split("_")[1] + p.suffix for p in tmp_path.iterdir())
+    assert names == ["busy.lock", "busy.so", "kept.lock", "kept.so", "new.lock", "new.so"]
+    assert float(compiled(old)(1.0)) == 2.0  # compiled again when needed
 
 
 def test_without_a_compiler_the_function_runs_uncompiled(
