@@ -8,6 +8,8 @@ position satisfies) is not handed to any solver: it fails at once, with the proo
 When IPOPT fails (infeasible, iteration or time limit, non-finite numbers, exception), the same
 NLP is solved again cold from the alternative guesses of controllers.recovery (braking, previous
 plan, reversing, straight line), and the first that succeeds is used and counted (`recovered_by`).
+On the structured backend these retries are FATROP's alone: its IPOPT fallback answers the step's
+own problem, from the warm guess, only.
 Fallback when all of them fail: the next control of the last solved plan, if that plan's remaining
 states are still collision-free against the obstacles as now predicted; otherwise a braking
 command v = 0, omega = 0. The result is marked as a fallback and the loop goes on; `solve` never
@@ -59,6 +61,15 @@ class NMPCController:
         self._plan: Plan | None = None  # last successfully solved plan
         self._plan_age = 0  # control steps since that plan was solved
         self._repeats = RepeatedProblems() if self._backend.pure else None
+        # the retries from the recovery guesses: FATROP alone on the structured backend. From these
+        # guesses its IPOPT fallback solved none of 621 failed steps' problems (the suite, the
+        # claims report, the paper's gamma cells; README, "Solver retries") and took 4.4 s of the
+        # suite's 70 s of CPU, up to 40 ms a guess inside a 100 ms control period
+        self._retry_solve = (
+            self._backend.solve_without_fallback
+            if isinstance(self._backend, FatropSolver)
+            else self._backend.solve
+        )
         self._solves = [0, 0]  # this step's problems: [solved, answered by self._repeats]
         #: Called with each control step's problem (parameter vector, warm-start guess) before it
         #: is solved (not the retries): how `husky-sim bench` records a closed loop to replay.
@@ -160,7 +171,7 @@ class NMPCController:
         recovered_by = ""
         solver_fallbacks = [raw.fallback_reason]  # the first solve's, kept when a retry answers
         if not raw.success and not proof:
-            retry, recovered_by = self._retry(state, params, p_vec)
+            retry, recovered_by = self._retry(state, params, p_vec, guess_vector)
             raw = retry or raw
             solver_fallbacks.append(raw.fallback_reason)
         if raw.success:
@@ -196,20 +207,22 @@ class NMPCController:
             repeated=self._solves[0] == 0 and self._solves[1] > 0,
         )
 
-    def _run_solver(self, p_vec: np.ndarray, guess: np.ndarray) -> RawSolution:
-        """The backend's answer to one problem, looked up where this step or the one before posed
-        the same problem (controllers.backends.repeats)."""
+    def _run_solver(self, p_vec: np.ndarray, guess: np.ndarray, retry: bool = False) -> RawSolution:
+        """The backend's answer to one problem (`retry`: the retries' solver), looked up where this
+        step or the one before posed the same problem (controllers.backends.repeats)."""
+        solve = self._retry_solve if retry else self._backend.solve
         if self._repeats is None:
-            raw, repeated = self._backend.solve(p_vec, guess), False
+            raw, repeated = solve(p_vec, guess), False
         else:
-            raw, repeated = self._repeats.solve(self._backend.solve, p_vec, guess)
+            raw, repeated = self._repeats.solve(solve, p_vec, guess, b"retry" if retry else b"")
         self._solves[1 if repeated else 0] += 1
         return raw
 
     def _retry(
-        self, state: np.ndarray, params: OCPParameters, p_vec: np.ndarray
+        self, state: np.ndarray, params: OCPParameters, p_vec: np.ndarray, tried: np.ndarray
     ) -> tuple[RawSolution | None, str]:
-        """Cold re-solves from the recovery guesses; the first success and its guess's name."""
+        """Cold re-solves from the recovery guesses; the first success and its guess's name.
+        `tried`: the guess the step's own solve failed from."""
         cfg = self.config
         previous = self._plan.shifted(self._plan_age + 1).controls if self._plan is not None else None
         candidates = recovery_commands(
@@ -227,10 +240,12 @@ class NMPCController:
                 states.append(step(states[-1], command, cfg.tau_s))
             n = cfg.horizon
             guess = Plan(np.array(states), commands.copy(), np.zeros(n), np.ones(n)).to_vector(self._layout)
+            if self._repeats is not None and np.array_equal(guess, tried):
+                continue  # a pure backend, its fallback included, has just failed from this guess
             self._backend.reset()
             with deliver_after_solve():
                 try:
-                    raw = self._run_solver(p_vec, guess)
+                    raw = self._run_solver(p_vec, guess, retry=True)
                 except Exception:  # noqa: BLE001 - try the next guess
                     continue
             if raw.success:

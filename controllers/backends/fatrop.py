@@ -26,9 +26,11 @@ Three decisions make FATROP converge where it used to stall (README, "Solver bac
 
 A FATROP solve is accepted only if its exit flag is one of ACCEPTED_EXITS, its decision is finite
 and every constraint holds to CONSTRAINT_CHECK_TOL. Otherwise the same problem is solved by the
-reference IpoptSolver (built when the FATROP solver is) from the same guess, cold, so its answer
+reference IpoptSolver (built on the first fallback) from the same guess, cold, so its answer
 depends only on the problem and the guess, and the solution says why (`fallback_reason`: the
 exit flag and iteration count), so that every fallback is counted and logged by the controller.
+`solve_without_fallback` is FATROP alone: the paper controllers' retries from their recovery
+guesses (controllers.nmpc), where IPOPT's cold verdicts only cost time.
 Without a C compiler the function runs uncompiled: FATROP's exit flag is then not visible, so only
 a converged solve is accepted and its acceptable exits go to IPOPT.
 """
@@ -195,11 +197,18 @@ class FatropSolver:
         return ""
 
     def solve(self, parameters: np.ndarray, guess: np.ndarray) -> RawSolution:
+        """FATROP's answer, or where it is refused, the reference IPOPT's from the same guess."""
+        raw = self.solve_without_fallback(parameters, guess)
+        return raw if raw.success else self._fall_back(parameters, guess, raw.status)
+
+    def solve_without_fallback(self, parameters: np.ndarray, guess: np.ndarray) -> RawSolution:
+        """FATROP's answer alone: a refused one comes back failed (decision: the guess), its status
+        saying why (the exit flag and iterations, or the check it failed)."""
         stagewise = self._stagewise
+        iterations = -1
         if not (np.isfinite(parameters).all() and np.isfinite(guess).all()):
             # FATROP does not check its inputs: a NaN makes its regularisation loop spin forever
-            reason = "non-finite parameters or guess"
-            return self._fall_back(parameters, guess, reason)
+            return RawSolution(guess, False, "non-finite parameters or guess", iterations, self.name)
         try:
             x, g = self._function.call([stagewise.to_stage_order(guess), parameters, *self._bound_args])
         except RuntimeError:
@@ -216,7 +225,7 @@ class FatropSolver:
                     return RawSolution(stagewise.from_stage_order(x), True, status, iterations, self.name)
             else:
                 reason = f"{exit_flag} after {iterations} iterations"
-        return self._fall_back(parameters, guess, reason)
+        return RawSolution(guess, False, reason, iterations, self.name)
 
     def _fall_back(self, parameters: np.ndarray, guess: np.ndarray, reason: str) -> RawSolution:
         """The reference IPOPT's answer to the same problem, cold, saying why FATROP's was not used."""

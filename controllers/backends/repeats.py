@@ -39,10 +39,13 @@ class RepeatedProblems:
         solve: Callable[[np.ndarray, np.ndarray], RawSolution],
         parameters: np.ndarray,
         guess: np.ndarray,
+        kind: bytes = b"",
     ) -> tuple[RawSolution, bool]:
         """solve(parameters, guess), or the answer it gave to the same bytes this step or the last;
-        and whether it was looked up. `solve` must be pure. An exception is not remembered."""
-        key = parameters.tobytes() + guess.tobytes()
+        and whether it was looked up. `solve` must be pure; `kind` tells apart solves that answer
+        the same problem differently (a solver with and without its fallback). An exception is
+        not remembered."""
+        key = kind + parameters.tobytes() + guess.tobytes()
         known = self._current.get(key, self._previous.get(key))
         repeated = known is not None
         if known is None:

@@ -17,7 +17,7 @@ from controllers import NMPCConfig, NMPCController, Obstacle, SetPoint
 from controllers.backends import FatropSolver, IpoptSolver
 from controllers.backends import compiled as compiled_module
 from controllers.backends.compiled import FATROP_RETURN_FLAGS, cache_dir, compiled
-from controllers.backends.nlp import NLP
+from controllers.backends.nlp import NLP, RawSolution
 from controllers.backends.stagewise import NotStagewiseError, StageIndices, transcribe
 from controllers.config import SolverOptions
 from controllers.husky_cbf.ocp import build_problem
@@ -142,6 +142,12 @@ def test_fatrop_failures_fall_back_to_ipopt_and_say_why() -> None:
     capped = FatropSolver(paper_nlp(config), SolverOptions(max_iter=2)).solve(p, guess)
     assert capped.solver == "ipopt"  # IPOPT runs under the same cap, so it need not converge
     assert capped.fallback_reason.startswith("fatrop: MaxIterExceeded after ")
+    # without its fallback the same exit comes back as FATROP's failure, and IPOPT is never built
+    solver = FatropSolver(paper_nlp(config), SolverOptions(max_iter=2))
+    alone = solver.solve_without_fallback(p, guess)
+    assert not alone.success and alone.solver == "fatrop"
+    assert alone.status.startswith("MaxIterExceeded after ")
+    assert np.array_equal(alone.decision, guess) and solver._reference is None
 
     solver = FatropSolver(paper_nlp(config), SolverOptions())
     solver._function = StandIn(error=RuntimeError("Evaluation failed"))
@@ -153,9 +159,36 @@ def test_fatrop_failures_fall_back_to_ipopt_and_say_why() -> None:
     stagewise = solver._stagewise
     infeasible = stagewise.to_stage_order(guess)
     g = ca.Function("g", [stagewise.nlp["x"], stagewise.nlp["p"]], [stagewise.nlp["g"]])
+    # the status shim reports the library's last real exit: a real solve makes it an accepted one
+    assert solver.solve(p, guess).solver == "fatrop"
     solver._function = StandIn(answer=[ca.DM(infeasible), g(infeasible, p)])
     raw = solver.solve(p, guess)
     assert raw.solver == "ipopt" and raw.fallback_reason.startswith("fatrop: constraint check")
+
+
+def test_a_failed_step_asks_ipopt_once_and_retries_on_fatrop_alone(
+    monkeypatch: pytest.MonkeyPatch, fatrop_solves: dict[str, int]
+) -> None:
+    """A paper controller's failed step: its own problem falls back to IPOPT, its retries from the
+    recovery guesses are FATROP's alone (controllers.nmpc), and the brake guess, the first one
+    again, is not solved twice. The robot is 0.02 m inside two circles, ahead and behind (the
+    squeeze of test_reachability, its proof switched off so that the solvers are asked)."""
+    monkeypatch.setattr("controllers.nmpc.proven_infeasible", lambda config, params: "")
+    ipopt_solves = {"n": 0}
+    solve = IpoptSolver.solve
+
+    def counted(self: IpoptSolver, parameters: np.ndarray, guess: np.ndarray) -> RawSolution:
+        ipopt_solves["n"] += 1
+        return solve(self, parameters, guess)
+
+    monkeypatch.setattr(IpoptSolver, "solve", counted)
+    config = NMPCConfig(safety="bt", horizon=5, gamma=0.1, obstacle_slots=2)
+    obstacles = [Obstacle(0.73, 0.0, 0.5), Obstacle(-0.73, 0.0, 0.5)]
+    result = NMPCController(config).solve(np.zeros(3), SetPoint(3.0, 0.0, 0.0), obstacles, 0.0)
+    assert not result.success and result.fallback == "brake" and result.recovered_by == ""
+    assert result.solver == "ipopt" and result.solver_fallback.startswith("fatrop: ")
+    # FATROP from the first guess, the reverse and the straight ones; IPOPT from the first only
+    assert fatrop_solves["n"] == 3 and ipopt_solves["n"] == 1
 
 
 def test_fatrop_never_sees_non_finite_data() -> None:
