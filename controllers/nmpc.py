@@ -240,7 +240,7 @@ class NMPCController:
                 states.append(step(states[-1], command, cfg.tau_s))
             n = cfg.horizon
             guess = Plan(np.array(states), commands.copy(), np.zeros(n), np.ones(n)).to_vector(self._layout)
-            if self._repeats is not None and np.array_equal(guess, tried):
+            if self._backend.pure and np.array_equal(guess, tried):
                 continue  # a pure backend, its fallback included, has just failed from this guess
             self._backend.reset()
             with deliver_after_solve():
