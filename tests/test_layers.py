@@ -17,7 +17,8 @@ ALLOWED = {
     "realcheck": {"sim", "runs"},
     "bench": {"sim", "runs"},
     "ros2": {"sim", "runs"},
-    "cli": {"sim", "runs", "viz", "study", "realcheck", "bench", "ros2"},
+    "calibration": {"sim"},
+    "cli": {"sim", "runs", "viz", "study", "realcheck", "bench", "ros2", "calibration"},
 }
 SHARED = {"interrupts", "paths", "scenario_file"}  # the top-level modules every layer may use
 

@@ -16,6 +16,7 @@ from husky_sim.runs.paper_problems import CLUTTERED_POINT_STABILISATION
 from husky_sim.sim.drive import DriveConfig
 from husky_sim.sim.environment import HuskyEnvironment
 from husky_sim.sim.episode import EpisodeConfig, run_episode
+from husky_sim.sim.ground import load_ground, with_friction
 from husky_sim.sim.open_loop import simulate_commands
 from husky_sim.sim.outcomes import Outcomes
 from husky_sim.sim.world import ObstacleSpec, WorldConfig, obstacle_specs_from
@@ -75,7 +76,11 @@ def drive_open_loop(
         seconds,
         (0.0, 0.0, 0.0),
         world=WorldConfig(physics_hz=physics_hz, ground_friction=ground_friction),
-        drive=replace(nominal, wheel_torque_limit_nm=nominal.wheel_torque_limit_nm * torque_scale),
+        drive=replace(
+            nominal,
+            motor=replace(nominal.motor, current_limit_a=nominal.motor.current_limit_a * torque_scale),
+        ),
+        ground=with_friction(load_ground(), ground_friction),
         payload_kg=payload_kg,
     )
     steps = len(track.applied)
@@ -157,10 +162,9 @@ def run_sim_bench(
     with HuskyEnvironment(config) as env:  # bare: the drive and the physics, no clearance check
         world, robot, drive, periods = env.world, env.robot, env.drive, stepping_steps // env.substeps
         stepping_steps = periods * env.substeps  # whole control periods, for the checked loop
-        torque = config.drive.wheel_torque_limit_nm
         t0 = time.perf_counter()
         for _ in range(stepping_steps):
-            robot.command_wheels(*drive.wheel_speeds(drive.limit(command, world.dt_s)), torque)
+            drive.step(robot, command, world.dt_s)
             world.step()
         walls.append(time.perf_counter() - t0)
     with HuskyEnvironment(config) as env:  # checked: the episode's own physics loop

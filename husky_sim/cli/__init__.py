@@ -16,13 +16,26 @@ import sys
 from collections.abc import Sequence
 
 from husky_sim import interrupts
-from husky_sim.cli import bench, check, identify, paper, plot, render, replay, ros2, run, scenarios, suite
+from husky_sim.cli import (
+    bench,
+    calibrate,
+    check,
+    identify,
+    paper,
+    plot,
+    render,
+    replay,
+    ros2,
+    run,
+    scenarios,
+    suite,
+)
 from husky_sim.cli.common import CONTROLLER_CHOICES, SOLVER_CHOICES, OneLineErrorParser, UsageError
 
 __all__ = ["CONTROLLER_CHOICES", "SOLVER_CHOICES", "UsageError", "build_parser", "entry", "main"]
 
 #: The commands in the order `husky-sim --help` lists them.
-COMMANDS = (scenarios, run, ros2, render, suite, paper, bench, check, plot, identify, replay)
+COMMANDS = (scenarios, run, ros2, render, suite, paper, bench, check, plot, identify, replay, calibrate)
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -22,7 +22,6 @@ def cmd_replay(args: argparse.Namespace) -> int:
         odom_topic=args.odom_topic,
         multiplier=args.wheel_separation_multiplier,
         ground_friction=args.ground_friction,
-        do_fit=args.fit,
     )
     print("\n".join(lines))
     return 0
@@ -42,9 +41,6 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
         "--out", type=path_arg, default=None, help="output directory (default results/replay__<bag>)"
     )
     replay.add_argument(
-        "--fit", action="store_true", help="fit the multiplier and ground friction not given below to the ATE"
-    )
-    replay.add_argument(
         "--wheel-separation-multiplier",
         type=number_in(float, 0.5, 5.0),
         default=None,
@@ -52,6 +48,10 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
         help="default 1.875",
     )
     replay.add_argument(
-        "--ground-friction", type=number_in(float, 0.01, 5.0), default=None, metavar="MU", help="default 1.0"
+        "--ground-friction",
+        type=number_in(float, 0.01, 5.0),
+        default=None,
+        metavar="MU",
+        help="the tyres' friction coefficient (default: the default ground's)",
     )
     replay.set_defaults(func=cmd_replay)

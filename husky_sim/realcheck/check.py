@@ -261,6 +261,7 @@ PERTURBATION_AXES = (
     ("obstacle_xy_std_m", "obstacle noise std (m)"),
     ("obstacle_velocity_scale", "obstacle speed told / true"),
     ("torque_scale", "torque limit / nominal"),
+    ("yaw_ratio", "yaw ratio"),
 )
 
 
@@ -294,15 +295,17 @@ def write_plots(report: CheckReport, out_dir: Path) -> dict[str, str]:
     ax.legend()
     fig.savefig(out_dir / "clearance_hist.png", dpi=110)
 
-    fig = Figure(figsize=(12, 5.5), layout="constrained")
+    columns = 5
+    rows = -(-len(PERTURBATION_AXES) // columns)
+    fig = Figure(figsize=(14, 2.75 * rows), layout="constrained")
     for k, (name, label) in enumerate(PERTURBATION_AXES):
-        ax = fig.add_subplot(2, 4, k + 1)
+        ax = fig.add_subplot(rows, columns, k + 1)
         x = np.array([getattr(p, name) for _, p in pairs])
         ax.scatter(x[ok], clear[ok], s=12, c="tab:green")
         ax.scatter(x[~ok], clear[~ok], s=16, c="tab:red", marker="x")
         ax.axhline(0.0, color="k", lw=0.8, ls="--")
         ax.set_xlabel(label)
-        if k % 4 == 0:
+        if k % columns == 0:
             ax.set_ylabel("min clearance (m)")
     fig.suptitle("minimum clearance against each perturbation (red: failing samples)")
     fig.savefig(out_dir / "sensitivity.png", dpi=90)
@@ -323,7 +326,7 @@ def _sample_row(r: dict[str, Any], p: Perturbation) -> str:
         f"| {p.index} | {r['outcome']} | {'yes' if r['passed'] else 'no'} | {_num(r['min_clearance_m'])} | "
         f"{p.ground_friction:.2f} | {p.payload_kg:.1f} | {p.latency_steps} | {p.pose_xy_std_m:.3f} | "
         f"{p.pose_yaw_std_rad:.3f} | {p.obstacle_xy_std_m:.3f} | {p.obstacle_velocity_scale:.2f} | "
-        f"{p.torque_scale:.2f} | {p.episode_seed} |"
+        f"{p.torque_scale:.2f} | {p.yaw_ratio:.2f} | {p.episode_seed} |"
     )
 
 
@@ -354,7 +357,8 @@ def markdown(report: CheckReport, plots: dict[str, str]) -> str:
         "",
         "Obstacle speed error is on the sensing side: the controller is told velocity x scale while "
         "the obstacles keep their true motion. Friction, payload, latency and noise replace the "
-        "scenario's values; the torque factor scales its wheel torque limit.",
+        "scenario's values; the torque factor scales its motor current limit; the yaw ratio sets the "
+        "tyres' lateral stiffness.",
         "",
         f"- nominal (unperturbed): {n['outcome']}, min clearance {_num(n['min_clearance_m'])} m",
         f"- pass rate (no collision and converged): {s['passed']}/{s['samples']} = {s['pass_rate']:.1%}",
@@ -379,8 +383,8 @@ def markdown(report: CheckReport, plots: dict[str, str]) -> str:
             lines += ["", f"![{title}]({plots[name]})"]
     header = [
         "| sample | outcome | passed | min clearance (m) | friction | payload (kg) | latency | pose std (m) "
-        "| yaw std (rad) | obstacle std (m) | obstacle speed x | torque x | episode seed |",
-        "|---|---|---|---|---|---|---|---|---|---|---|---|---|",
+        "| yaw std (rad) | obstacle std (m) | obstacle speed x | torque x | yaw ratio | episode seed |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     if report.failure_files:
         lines += [

@@ -22,13 +22,11 @@ Divergence (at the recorded pose times; the simulated pose is interpolated betwe
   * absolute trajectory error: RMSE and maximum of the position error (m);
   * drift per metre: final position error / recorded path length (m/m).
 
-`--fit` searches the effective wheel-separation multiplier and the ground friction coefficient
-that minimise the ATE (a coarse grid, then a 3 x 3 pattern search with halving steps; see `fit`)
-and prints them as scenario parameters. A parameter given on the command line is held, and only
-the other one is fitted. It also fits the recording's yaw-rate lag (husky_sim.sim.yaw_response: the
-recorded commands through the drive's limits against the recorded yaw rate, from the odometry twist
-when the recording has a non-zero one, else from the differentiated yaw) and prints it as
-`robot: yaw_response` scenario parameters.
+It also fits the recording's yaw-rate lag (husky_sim.sim.yaw_response: the recorded commands
+through the drive's limits against the recorded yaw rate, from the odometry twist when the
+recording has a non-zero one, else from the differentiated yaw) and prints it as `robot:
+yaw_response` scenario parameters. Fitting the simulated ground itself to a recording is
+`husky-sim calibrate` (husky_sim.calibration), the one fitting path.
 """
 
 from __future__ import annotations
@@ -44,6 +42,7 @@ import numpy as np
 
 from controllers.model import wrap_angle
 from husky_sim.sim.drive import DriveConfig, SkidSteerDrive
+from husky_sim.sim.ground import Ground, load_ground, with_friction
 from husky_sim.sim.open_loop import held_commands, simulate_commands
 from husky_sim.sim.world import WorldConfig
 from husky_sim.sim.yaw_response import YawResponse, fit_yaw_response, interval_means
@@ -51,9 +50,6 @@ from husky_sim.sim.yaw_response import YawResponse, fit_yaw_response, interval_m
 CSV_COLUMNS = ("t", "v", "omega", "x", "y", "theta")
 TWIST_TYPES = ("geometry_msgs/msg/Twist", "geometry_msgs/msg/TwistStamped")
 ODOMETRY_TYPE = "nav_msgs/msg/Odometry"
-#: Search ranges of --fit: wheel-separation multiplier (dimensionless), ground friction coefficient.
-MULTIPLIER_BOUNDS = (1.0, 3.0)
-FRICTION_BOUNDS = (0.2, 1.5)
 SUMMARY_NAME = "replay_summary.json"
 PLOT_NAME = "replay.png"
 
@@ -75,6 +71,10 @@ class SimParams:
 
     def drive(self) -> DriveConfig:
         return DriveConfig(wheel_separation_multiplier=self.wheel_separation_multiplier)
+
+    def ground(self) -> Ground:
+        """The default ground with this tyre friction coefficient."""
+        return with_friction(load_ground(), self.ground_friction)
 
     def scenario_yaml(self, yaw_response: YawResponse | None = None) -> str:
         """The parameters as a scenario snippet (husky_sim.runs.scenario: drive, friction.ground, and
@@ -346,91 +346,10 @@ def replay(recording: Recording, params: SimParams | None = None) -> ReplayRun:
         recording.start,
         world=params.world(),
         drive=params.drive(),
+        ground=params.ground(),
     )
     sim_poses = track.poses_at(recording.pose_t_s)
     return ReplayRun(params, sim_poses, divergence(recording.poses, sim_poses, recording.path_length_m()))
-
-
-# --------------------------------------------------------------------------------------------
-# fit
-
-
-@dataclass(frozen=True)
-class FitResult:
-    """The parameters with the smallest ATE found, and every evaluation (multiplier, friction,
-    ATE RMSE m) in the order it was made."""
-
-    best: ReplayRun
-    evaluations: tuple[tuple[float, float, float], ...]
-
-    def near_best(self, ratio: float = 1.25, slack_m: float = 0.005) -> tuple[float, float, float, float]:
-        """Smallest and largest multiplier and friction among the evaluations whose ATE is within
-        `ratio` x best + `slack_m` (m): a wide span means the recording does not pin them down."""
-        limit = ratio * self.best.divergence.ate_rmse_m + slack_m
-        near = np.array([(m, mu) for m, mu, ate in self.evaluations if ate <= limit])
-        (m_lo, mu_lo), (m_hi, mu_hi) = near.min(axis=0), near.max(axis=0)
-        return float(m_lo), float(m_hi), float(mu_lo), float(mu_hi)
-
-
-def _refinement_steps(values: Sequence[float], log: bool) -> float:
-    """Half the smallest gap of a search grid (as a log-ratio when `log`)."""
-    points = np.log(sorted(values)) if log else np.asarray(sorted(values), dtype=float)
-    return 0.5 * float(np.min(np.diff(points))) if len(points) > 1 else 0.1
-
-
-def fit(
-    recording: Recording,
-    base: SimParams | None = None,
-    *,
-    fit_multiplier: bool = True,
-    fit_friction: bool = True,
-    multipliers: Sequence[float] = tuple(np.linspace(*MULTIPLIER_BOUNDS, 9)),
-    frictions: Sequence[float] = tuple(np.geomspace(*FRICTION_BOUNDS, 5)),
-    refinements: int = 3,
-) -> FitResult:
-    """Wheel-separation multiplier and/or ground friction minimising the ATE; a parameter that is
-    not fitted keeps its value in `base` (default SimParams()), which is itself a candidate.
-
-    A coarse grid (multiplier linear, friction geometric), then `refinements` rounds of a 3 x 3
-    pattern around the best point so far with the step halved each round (the multiplier in
-    absolute terms, the friction as a ratio), clamped to MULTIPLIER_BOUNDS and FRICTION_BOUNDS.
-    A grid rather than a gradient or simplex search: the ATE is a rugged function of both
-    parameters (the simulated skid-steer turn stick-slips, so a 0.1 % change in friction can
-    move the end of a turn by centimetres), whose small dips trap local searches. The two also
-    trade off against each other (both set how much of a commanded yaw rate is achieved), so
-    with both free, check `FitResult.near_best` before trusting either.
-    """
-    base = base or SimParams()
-    runs: dict[tuple[float, float], ReplayRun] = {}
-
-    def evaluate(m: float, mu: float) -> None:
-        if fit_multiplier:
-            m = float(np.clip(m, *MULTIPLIER_BOUNDS))
-        if fit_friction:
-            mu = float(np.clip(mu, *FRICTION_BOUNDS))
-        key = (round(m, 6), round(mu, 6))
-        if key not in runs:
-            params = replace(base, wheel_separation_multiplier=key[0], ground_friction=key[1])
-            runs[key] = replay(recording, params)
-
-    def best_run() -> ReplayRun:
-        return min(runs.values(), key=lambda r: r.divergence.ate_rmse_m)
-
-    evaluate(base.wheel_separation_multiplier, base.ground_friction)
-    for m in multipliers if fit_multiplier else (base.wheel_separation_multiplier,):
-        for mu in frictions if fit_friction else (base.ground_friction,):
-            evaluate(m, mu)
-    m_step = _refinement_steps(multipliers, log=False) if fit_multiplier else 0.0
-    mu_log_step = _refinement_steps(frictions, log=True) if fit_friction else 0.0
-    for _ in range(refinements):
-        centre = best_run().params
-        for i in (-1, 0, 1):
-            for k in (-1, 0, 1):
-                m = centre.wheel_separation_multiplier + i * m_step
-                evaluate(m, centre.ground_friction * math.exp(k * mu_log_step))
-        m_step, mu_log_step = 0.5 * m_step, 0.5 * mu_log_step
-    evaluations = tuple((m, mu, r.divergence.ate_rmse_m) for (m, mu), r in runs.items())
-    return FitResult(best_run(), evaluations)
 
 
 # --------------------------------------------------------------------------------------------
@@ -494,16 +413,11 @@ def fit_recording_yaw(recording: Recording, params: SimParams | None = None) -> 
 
 
 def summary_dict(
-    recording: Recording,
-    runs: dict[str, ReplayRun],
-    fitted: FitResult | None,
-    inputs: dict[str, object],
-    yaw: YawFit | None = None,
+    recording: Recording, runs: dict[str, ReplayRun], inputs: dict[str, object], yaw: YawFit | None = None
 ) -> dict[str, object]:
     """The JSON summary: inputs, the recording's extent, each run's parameters and divergence, and
-    with a fit, the fitted parameters and the recording's yaw-rate lag (`fit.yaw_response`, null
-    when the recording never turns)."""
-    summary: dict[str, object] = {
+    the recording's yaw-rate lag (`yaw_response`, null when the recording never turns)."""
+    return {
         "source": recording.source,
         **inputs,
         "commands": len(recording.commands),
@@ -511,19 +425,8 @@ def summary_dict(
         "duration_s": recording.duration_s,
         "path_length_m": recording.path_length_m(),
         "runs": {name: {"params": asdict(r.params), **r.divergence.summary()} for name, r in runs.items()},
+        "yaw_response": None if yaw is None else yaw.summary(),
     }
-    if fitted is not None:
-        m_lo, m_hi, mu_lo, mu_hi = fitted.near_best()
-        summary["fit"] = {
-            **asdict(fitted.best.params),
-            "ate_rmse_m": fitted.best.divergence.ate_rmse_m,
-            "simulations": len(fitted.evaluations),
-            "near_best_multiplier": [m_lo, m_hi],
-            "near_best_ground_friction": [mu_lo, mu_hi],
-            "yaw_response": None if yaw is None else yaw.summary(),
-            "scenario_yaml": fitted.best.params.scenario_yaml(None if yaw is None else yaw.response),
-        }
-    return summary
 
 
 def plot_replay(recording: Recording, runs: dict[str, ReplayRun], path: Path) -> None:
@@ -555,21 +458,16 @@ def run_replay(
     odom_topic: str = "/odometry/filtered",
     multiplier: float | None = None,
     ground_friction: float | None = None,
-    do_fit: bool = False,
 ) -> list[str]:
-    """The `husky-sim replay` command: replay, optionally fit the parameters that were not given,
-    write the plot and the JSON summary to out_dir, and return the report lines."""
-    if do_fit and multiplier is not None and ground_friction is not None:
-        raise ReplayError(
-            "--fit: nothing left to fit (both the multiplier and the ground friction are given)"
-        )
+    """The `husky-sim replay` command: replay, measure the recording's yaw-rate lag, write the plot
+    and the JSON summary to out_dir, and return the report lines."""
     recording = load_recording(path, cmd_topic, odom_topic)
     params = SimParams()
     if multiplier is not None:
         params = replace(params, wheel_separation_multiplier=multiplier)
     if ground_friction is not None:
         params = replace(params, ground_friction=ground_friction)
-    _ = params.world(), params.drive()  # a bad value fails here, before any simulation
+    _ = params.world(), params.drive(), params.ground()  # a bad value fails here, before any simulation
     lines = [
         f"{recording.source}: {len(recording.commands)} commands, {len(recording.poses)} poses over "
         f"{recording.duration_s:.2f} s, recorded path {recording.path_length_m():.2f} m"
@@ -579,62 +477,27 @@ def run_replay(
         f"replay (multiplier {params.wheel_separation_multiplier:g}, ground friction "
         f"{params.ground_friction:g}): {runs['replay'].divergence.line()}"
     )
-    fitted, yaw = None, None
-    if do_fit:
-        free_m, free_mu = multiplier is None, ground_friction is None
-        fitted = fit(recording, params, fit_multiplier=free_m, fit_friction=free_mu)
-        runs["fit"] = fitted.best
-        try:
-            yaw = fit_recording_yaw(recording, params)
-        except ValueError as exc:  # a recording that never turns: the lag is not identified
-            lines.append(f"yaw-rate lag not identified ({_one_line(exc)})")
-        lines += _fit_lines(fitted, free_m, free_mu, yaw)
+    yaw = None
+    try:
+        yaw = fit_recording_yaw(recording, params)
+        lines += [yaw.line(), "scenario parameters:"]
+        lines += ["  " + line for line in params.scenario_yaml(yaw.response).splitlines()]
+    except ValueError as exc:  # a recording that never turns: the lag is not identified
+        lines.append(f"yaw-rate lag not identified ({_one_line(exc)})")
     try:
         out_dir.mkdir(parents=True, exist_ok=True)
-        _write_outputs(out_dir, recording, runs, fitted, cmd_topic, odom_topic, yaw)
+        inputs: dict[str, object] = {"format": recording.format}
+        if recording.format != "csv":
+            inputs.update(cmd_topic=cmd_topic, odom_topic=odom_topic)
+        (out_dir / SUMMARY_NAME).write_text(
+            json.dumps(summary_dict(recording, runs, inputs, yaw), indent=2) + "\n"
+        )
+        plot_replay(recording, runs, out_dir / PLOT_NAME)
     except OSError as exc:
         raise ReplayError(f"{out_dir}: cannot write the outputs ({exc})") from None
     lines.append(f"wrote {out_dir / SUMMARY_NAME} and {out_dir / PLOT_NAME}")
     return lines
 
 
-def _write_outputs(
-    out_dir: Path,
-    recording: Recording,
-    runs: dict[str, ReplayRun],
-    fitted: FitResult | None,
-    cmd_topic: str,
-    odom_topic: str,
-    yaw: YawFit | None = None,
-) -> None:
-    inputs = {"format": recording.format}
-    if recording.format != "csv":
-        inputs.update(cmd_topic=cmd_topic, odom_topic=odom_topic)
-    summary = summary_dict(recording, runs, fitted, inputs, yaw)
-    (out_dir / SUMMARY_NAME).write_text(json.dumps(summary, indent=2) + "\n")
-    plot_replay(recording, runs, out_dir / PLOT_NAME)
-
-
 def _one_line(exc: Exception) -> str:
     return " ".join(str(exc).split())
-
-
-def _fit_lines(
-    fitted: FitResult, fit_multiplier: bool, fit_friction: bool, yaw: YawFit | None = None
-) -> list[str]:
-    best = fitted.best
-    m_lo, m_hi, mu_lo, mu_hi = fitted.near_best()
-    names = (("wheel-separation multiplier", fit_multiplier), ("ground friction", fit_friction))
-    which = " and ".join(name for name, on in names if on)
-    lines = [f"fit of the {which} ({len(fitted.evaluations)} simulations): {best.divergence.line()}"]
-    if fit_multiplier and fit_friction:
-        lines.append(
-            f"  simulations within 1.25 x the best ATE + 5 mm span multiplier {m_lo:.4g}-{m_hi:.4g} and "
-            f"ground friction {mu_lo:.4g}-{mu_hi:.4g} (the two trade off: give one to fit only the other)"
-        )
-    if yaw is not None:
-        lines.append(yaw.line())
-    lines.append("scenario parameters:")
-    yaml_text = best.params.scenario_yaml(None if yaw is None else yaw.response)
-    lines += ["  " + line for line in yaml_text.splitlines()]
-    return lines

@@ -39,6 +39,8 @@ import numpy as np
 
 from husky_sim.runs.parallel import Backend, parallel_map
 from husky_sim.runs.scenario import Scenario, scenario_from_data
+from husky_sim.sim.geometry import load_geometry
+from husky_sim.sim.tyre import stiffness_ratio_for_yaw_ratio
 
 #: Per-sample result keys that are wall-clock measurements (excluded from determinism checks).
 WALL_CLOCK_KEYS = ("solve_ms_median", "solve_ms_p95", "solve_ms_max", "wall_time_s")
@@ -59,7 +61,10 @@ class PerturbationRanges:
     pose_yaw_std_rad: tuple[float, float] = (0.0, 0.03)  # localisation heading noise std, rad
     obstacle_xy_std_m: tuple[float, float] = (0.0, 0.05)  # obstacle-detection position noise std, m
     obstacle_velocity_scale: tuple[float, float] = (0.8, 1.2)  # reported / true obstacle speed
-    torque_scale: tuple[float, float] = (0.7, 1.0)  # wheel torque limit / nominal
+    torque_scale: tuple[float, float] = (0.7, 1.0)  # motor current (torque) limit / nominal
+    #: the plant's steady yaw ratio (measured / wheel-implied yaw rate): the real runs we know span
+    #: 0.43-0.54 (husky_sim.calibration); set through the tyres' lateral stiffness
+    yaw_ratio: tuple[float, float] = (0.43, 0.54)
 
     def __post_init__(self) -> None:
         for f in fields(self):
@@ -82,6 +87,7 @@ class Perturbation:
     obstacle_xy_std_m: float
     obstacle_velocity_scale: float
     torque_scale: float
+    yaw_ratio: float
 
     def as_dict(self) -> dict[str, float | int]:
         return asdict(self)
@@ -94,6 +100,7 @@ class Perturbation:
             f"{np.degrees(self.pose_yaw_std_rad):.2f} deg, "
             f"obstacle noise {self.obstacle_xy_std_m * 100:.1f} cm, "
             f"obstacle speed x{self.obstacle_velocity_scale:.2f}, torque x{self.torque_scale:.2f}, "
+            f"yaw ratio {self.yaw_ratio:.2f}, "
             f"seed {self.episode_seed}"
         )
 
@@ -116,6 +123,7 @@ def sample_perturbations(ranges: PerturbationRanges, count: int, seed: int) -> l
                 "obstacle_xy_std_m",
                 "obstacle_velocity_scale",
                 "torque_scale",
+                "yaw_ratio",
             )
         }
         low, high = ranges.latency_steps
@@ -124,9 +132,9 @@ def sample_perturbations(ranges: PerturbationRanges, count: int, seed: int) -> l
     return out
 
 
-def nominal_torque_nm(scenario: Scenario) -> float:
-    """The scenario's wheel torque limit (N m): its drive override or the DriveConfig default."""
-    return scenario.drive.config().wheel_torque_limit_nm
+def nominal_current_a(scenario: Scenario) -> float:
+    """The scenario's motor current limit (A): its drive override or the MotorConfig default."""
+    return scenario.drive.config().motor.current_limit_a
 
 
 def apply_perturbation(scenario: Scenario, p: Perturbation) -> Scenario:
@@ -137,7 +145,8 @@ def apply_perturbation(scenario: Scenario, p: Perturbation) -> Scenario:
     data["seed"] = p.episode_seed
     data["friction"]["ground"] = p.ground_friction
     data["robot"]["payload_kg"] = p.payload_kg
-    data["drive"]["wheel_torque_limit_nm"] = nominal_torque_nm(scenario) * p.torque_scale
+    data["drive"]["current_limit_a"] = nominal_current_a(scenario) * p.torque_scale
+    data["friction"]["lateral_stiffness_ratio"] = stiffness_ratio_for_yaw_ratio(p.yaw_ratio, load_geometry())
     data["sensing"].update(
         latency_steps=p.latency_steps,
         pose_xy_std_m=p.pose_xy_std_m,

@@ -14,6 +14,7 @@ them with the same schema.
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import json
 import math
@@ -41,9 +42,9 @@ from husky_sim.scenario_file import ScenarioFileError, read_scenario_data
 from husky_sim.sim.drive import DriveConfig
 from husky_sim.sim.episode import EpisodeConfig
 from husky_sim.sim.geometry import load_geometry
+from husky_sim.sim.ground import DEFAULT_GROUND, load_ground, with_friction
 from husky_sim.sim.kinematic import KinematicProblem
 from husky_sim.sim.outcomes import Outcomes
-from husky_sim.sim.robot import WheelFriction
 from husky_sim.sim.sensing import SensingConfig
 from husky_sim.sim.world import ObstacleSpec, WorldConfig
 from husky_sim.sim.yaw_response import DEFAULT_FILE as YAW_RESPONSE_FILE
@@ -329,18 +330,25 @@ class DriveSpec(_Strict):
     max_angular_radps: _real(0.0, 10.0, "rad/s", lo_open=True) | None = None
     max_linear_accel_mps2: _real(0.0, 50.0, "m/s^2", lo_open=True) | None = None
     max_angular_accel_radps2: _real(0.0, 100.0, "rad/s^2", lo_open=True) | None = None
-    wheel_torque_limit_nm: _real(0.0, 500.0, "N m", lo_open=True) | None = None
+    #: the motor controller's current limit per side (A); it sets the wheels' torque limit
+    current_limit_a: _real(0.1, 500.0, "A") | None = None
 
     def config(self) -> DriveConfig:
-        return DriveConfig(**self.model_dump(exclude_none=True))
+        limits = self.model_dump(exclude_none=True)
+        current = limits.pop("current_limit_a", None)
+        base = DriveConfig(**limits)
+        if current is None:
+            return base
+        return dataclasses.replace(base, motor=dataclasses.replace(base.motor, current_limit_a=current))
 
 
 class FrictionSpec(_Strict):
-    """Ground and wheel friction; omitted ones keep the simulator's defaults."""
+    """Override of the ground's tyre friction coefficient (husky_sim.sim.tyre); omitted: the
+    ground file's own."""
 
-    ground: _real(0.01, 5.0) = WorldConfig.ground_friction
-    wheel_longitudinal: _real(0.01, 5.0) = WheelFriction.longitudinal
-    wheel_lateral_scale: _real(0.01, 5.0) = WheelFriction.lateral_scale
+    ground: _real(0.01, 5.0) | None = None
+    #: the tyres' lateral / longitudinal stiffness (sets the yaw ratio: husky_sim.sim.tyre)
+    lateral_stiffness_ratio: _real(0.05, 20.0) | None = None
 
 
 class SensingSpec(_Strict):
@@ -383,6 +391,8 @@ class Scenario(_Strict):
     random_obstacles: RandomObstacles | None = None
     controller: ControllerSpec = ControllerSpec()
     drive: DriveSpec = DriveSpec()
+    #: a shipped ground's name (assets/husky_a200/grounds) or a ground file's path
+    ground: Annotated[str, Field(min_length=1, max_length=500)] = DEFAULT_GROUND
     friction: FrictionSpec = FrictionSpec()
     sensing: SensingSpec = SensingSpec()
     success: SuccessSpec = SuccessSpec()
@@ -402,6 +412,11 @@ class Scenario(_Strict):
                 f"duration_s: {self.duration_s:g} s is {steps} control steps at tau_s = {self.tau_s:g} s; "
                 f"at most {MAX_CONTROL_STEPS} are allowed"
             )
+        return self
+
+    @model_validator(mode="after")
+    def _ground_known(self) -> Scenario:
+        load_ground(self.ground)  # a GroundError (a ValueError) names the ground and what is wrong
         return self
 
     @model_validator(mode="after")
@@ -533,18 +548,23 @@ class Scenario(_Strict):
 
     def episode_config(self) -> EpisodeConfig:
         """Everything the PyBullet episode needs besides the controller and the reference."""
-        f = self.friction
+        ground = with_friction(load_ground(self.ground), self.friction.ground)
+        if self.friction.lateral_stiffness_ratio is not None:
+            tyre = dataclasses.replace(
+                ground.tyre, lateral_stiffness_ratio=self.friction.lateral_stiffness_ratio
+            )
+            ground = dataclasses.replace(ground, tyre=tyre)
         return EpisodeConfig(
             start=(self.robot.start.x_m, self.robot.start.y_m, self.robot.start.yaw_rad),
             tau_s=self.tau_s,
             duration_s=self.duration_s,
             world=WorldConfig(
-                physics_hz=self.physics_hz, ground_friction=f.ground, obstacles=tuple(self.obstacle_specs())
+                physics_hz=self.physics_hz,
+                ground_friction=ground.tyre.friction,
+                obstacles=tuple(self.obstacle_specs()),
             ),
             drive=self.drive.config(),
-            wheel_friction=WheelFriction(
-                longitudinal=f.wheel_longitudinal, lateral_scale=f.wheel_lateral_scale
-            ),
+            ground=ground,
             sensing=SensingConfig(**self.sensing.model_dump()),  # same field names
             outcomes=Outcomes(**self.success.model_dump()),  # same field names
             payload_kg=self.robot.payload_kg,

@@ -47,9 +47,12 @@ class HuskyEnvironment:
         self.config = config
         self.world = World(config.world)
         try:
-            self.robot = HuskyRobot(self.world.client, config.start, config.wheel_friction, config.payload_kg)
+            ground = config.ground
+            self.robot = HuskyRobot(
+                self.world.client, config.start, ground.tyre, config.payload_kg, coulomb=not ground.calibrated
+            )
             geometry = self.robot.geometry
-            self.drive = SkidSteerDrive(config.drive, geometry.wheel_radius_m, geometry.track_width_m)
+            self.drive = SkidSteerDrive(config.drive, geometry.wheel_radius_m, geometry.track_width_m, ground)
             self.sensor = Sensor(config.sensing, config.seed)
             walls = zip(self.world.wall_ids, self.world.wall_planes, strict=True)
             self.monitor = ClearanceMonitor(
@@ -99,8 +102,7 @@ class HuskyEnvironment:
         applied = drive.applied
         checked = bool(world.obstacle_ids or world.wall_ids)
         for _ in range(self.substeps):
-            applied = drive.limit(command, world.dt_s)
-            robot.command_wheels(*drive.wheel_speeds(applied), self.config.drive.wheel_torque_limit_nm)
+            applied = drive.step(robot, command, world.dt_s)
             world.step()
             if on_physics_step is not None:
                 on_physics_step(applied)

@@ -25,9 +25,10 @@ from controllers import Controller, Reference, SetPoint
 from husky_sim import interrupts
 from husky_sim.sim.drive import DriveConfig
 from husky_sim.sim.environment import HuskyEnvironment
+from husky_sim.sim.ground import Ground, load_ground
 from husky_sim.sim.metrics import EpisodeMetrics, summarise
 from husky_sim.sim.outcomes import OutcomeMonitor, Outcomes
-from husky_sim.sim.robot import HuskyRobot, WheelFriction
+from husky_sim.sim.robot import HuskyRobot
 from husky_sim.sim.rollout import StepObserver, control_steps, rollout
 from husky_sim.sim.sensing import SensingConfig
 from husky_sim.sim.step_log import StepLog
@@ -44,7 +45,7 @@ class EpisodeConfig:
     duration_s: float = 30.0
     world: WorldConfig = field(default_factory=WorldConfig)
     drive: DriveConfig = field(default_factory=DriveConfig)
-    wheel_friction: WheelFriction = field(default_factory=WheelFriction)
+    ground: Ground = field(default_factory=load_ground)  # tyre contact and drive response
     sensing: SensingConfig = field(default_factory=SensingConfig)
     outcomes: Outcomes = field(default_factory=Outcomes)
     payload_kg: float = 0.0

@@ -11,7 +11,8 @@ import numpy as np
 
 from controllers.model import wrap_angle
 from husky_sim.sim.drive import DriveConfig, SkidSteerDrive
-from husky_sim.sim.robot import HuskyRobot, WheelFriction
+from husky_sim.sim.ground import Ground, load_ground
+from husky_sim.sim.robot import HuskyRobot
 from husky_sim.sim.world import World, WorldConfig
 
 #: A command stamped up to this long after a physics step still drives that step (s); absorbs the
@@ -27,6 +28,8 @@ class SimTrack:
     poses: np.ndarray  # (n + 1, 3) base_link x (m), y (m), yaw (rad)
     body_velocity: np.ndarray  # (n + 1, 2) achieved v (m/s) and yaw rate (rad/s)
     applied: np.ndarray  # (n, 2) limited command [v (m/s), omega (rad/s)] during step k
+    wheel_speeds: np.ndarray  # (n + 1, 4) measured wheel speeds (rad/s), left joints then right
+    motor_currents: np.ndarray  # (n + 1, 2) left and right motor current (A) in the step before
 
     def poses_at(self, t_s: np.ndarray) -> np.ndarray:
         """Poses (x m, y m, yaw rad) at times t_s (s), linearly interpolated between steps."""
@@ -52,25 +55,42 @@ def simulate_commands(
     *,
     world: WorldConfig | None = None,
     drive: DriveConfig | None = None,
-    wheel_friction: WheelFriction | None = None,
+    ground: Ground | None = None,
     payload_kg: float = 0.0,
+    wheel_targets: np.ndarray | None = None,
 ) -> SimTrack:
-    """Drive a Husky (with `payload_kg` on its top plate) on flat ground from `start` (x m, y m,
-    yaw rad, at rest) for `duration_s` (rounded up to whole physics steps) with the commands held
-    from their times `cmd_t_s` (s)."""
+    """Drive a Husky (with `payload_kg` on its top plate) on `ground` (default: the default
+    ground) from `start` (x m, y m, yaw rad, at rest) for `duration_s` (rounded up to whole
+    physics steps) with the commands held from their times `cmd_t_s` (s). `wheel_targets`, if
+    given, are (left, right) wheel speeds (rad/s) per command, sent in place of the drive's split
+    of the body command (a recording's measured wheel speeds, for the calibration)."""
     world = world or WorldConfig()
     drive = drive or DriveConfig()
+    ground = ground or load_ground()
     with World(world) as sim:
-        robot = HuskyRobot(sim.client, start, wheel_friction, payload_kg)
-        skid = SkidSteerDrive(drive, robot.geometry.wheel_radius_m, robot.geometry.track_width_m)
+        robot = HuskyRobot(sim.client, start, ground.tyre, payload_kg, coulomb=not ground.calibrated)
+        skid = SkidSteerDrive(drive, robot.geometry.wheel_radius_m, robot.geometry.track_width_m, ground)
         steps = max(math.ceil(duration_s * world.physics_hz - 1e-6), 0)
         t_s = np.arange(steps + 1) * sim.dt_s
         poses, velocities, applied = [robot.pose()], [robot.body_velocity()], []
-        for command in held_commands(cmd_t_s, commands, t_s[:-1]):
-            limited = skid.limit(command, sim.dt_s)
-            applied.append(limited)
-            robot.command_wheels(*skid.wheel_speeds(limited), drive.wheel_torque_limit_nm)
+        wheels, currents = [robot.wheel_speeds()], [(0.0, 0.0)]
+        held = held_commands(cmd_t_s, commands, t_s[:-1])
+        held_wheels = None if wheel_targets is None else held_commands(cmd_t_s, wheel_targets, t_s[:-1])
+        for k, command in enumerate(held):
+            if held_wheels is None:
+                applied.append(skid.step(robot, command, sim.dt_s))
+            else:
+                applied.append(skid.step_wheels(robot, command, tuple(held_wheels[k]), sim.dt_s))
             sim.step()
             poses.append(robot.pose())
             velocities.append(robot.body_velocity())
-    return SimTrack(t_s, np.array(poses), np.array(velocities), np.array(applied).reshape(-1, 2))
+            wheels.append(robot.wheel_speeds())
+            currents.append(skid.motor_currents(robot))
+    return SimTrack(
+        t_s,
+        np.array(poses),
+        np.array(velocities),
+        np.array(applied).reshape(-1, 2),
+        np.array(wheels),
+        np.array(currents),
+    )

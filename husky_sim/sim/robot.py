@@ -14,25 +14,7 @@ import numpy as np
 from husky_sim.sim.bullet import pybullet as p
 from husky_sim.sim.geometry import DEFAULT_URDF, RobotGeometry, load_geometry
 from husky_sim.sim.specs import HUSKY_DESCRIPTION
-
-
-@dataclass(frozen=True)
-class WheelFriction:
-    """Wheel contact parameters. PyBullet multiplies the two bodies' coefficients at a contact,
-    so with ground friction mu_g the effective longitudinal coefficient is mu_g x longitudinal and
-    the lateral one mu_g x longitudinal x lateral_scale (anisotropic friction along the axle)."""
-
-    longitudinal: float = 1.0  # wheel friction coefficient ([WHEEL]: mu = 1.0)
-    lateral_scale: float = 1.0  # lateral / longitudinal ratio (< 1: tyres slide sideways easier)
-    rolling: float = 0.0  # rolling friction (m)
-    spinning: float = 0.0  # torsional friction (m)
-
-    def __post_init__(self) -> None:
-        if not self.longitudinal > 0:
-            raise ValueError(f"wheel_friction.longitudinal: must be > 0, got {self.longitudinal}")
-        if not self.lateral_scale > 0:
-            raise ValueError(f"wheel_friction.lateral_scale: must be > 0, got {self.lateral_scale}")
-
+from husky_sim.sim.tyre import TyreContact, tyre_force
 
 #: Height (m) of the payload box (payload_inertia): our choice, the manual gives only the mass.
 PAYLOAD_HEIGHT_M = 0.10
@@ -51,6 +33,40 @@ def payload_inertia(payload_kg: float, com_m: tuple[float, float, float]) -> np.
     return own + shifted
 
 
+def _rotate(q: tuple[float, ...], v: tuple[float, ...]) -> tuple[float, float, float]:
+    """Vector v rotated by the unit quaternion q = (x, y, z, w) (plain floats)."""
+    qx, qy, qz, qw = q
+    vx, vy, vz = v
+    tx, ty, tz = 2.0 * (qy * vz - qz * vy), 2.0 * (qz * vx - qx * vz), 2.0 * (qx * vy - qy * vx)
+    return (
+        vx + qw * tx + qy * tz - qz * ty,
+        vy + qw * ty + qz * tx - qx * tz,
+        vz + qw * tz + qx * ty - qy * tx,
+    )
+
+
+#: Torque (N m) the joint motors may use to hold the speed drive_wheels chose on the tyre contact:
+#: that speed already respects the motor's limit, so the hold only overcomes the wheel's inertia.
+HOLD_TORQUE_NM = 1000.0
+
+
+@dataclass(frozen=True)
+class _WheelContact:
+    """One wheel on the ground: normal load (N), contact point (m), the unit vectors along and
+    across the wheel on the ground plane, and its hub's velocity along and across it (m/s)."""
+
+    link: int
+    side: int  # 0 left, 1 right
+    normal_n: float
+    point: tuple[float, float, float]
+    long_x: float
+    long_y: float
+    lat_x: float
+    lat_y: float
+    v_long: float
+    v_lat: float
+
+
 class HuskyRobot:
     """A Husky loaded into a PyBullet client (DIRECT), driven through its four wheel joints."""
 
@@ -58,8 +74,9 @@ class HuskyRobot:
         self,
         client: int,
         start: tuple[float, float, float],
-        friction: WheelFriction | None = None,
+        tyre: TyreContact | None = None,
         payload_kg: float = 0.0,
+        coulomb: bool = False,
         urdf_path=DEFAULT_URDF,
     ) -> None:
         self.client = client
@@ -79,17 +96,25 @@ class HuskyRobot:
         self.left_joints = [joints[n] for n in self.geometry.left_wheel_joint_names]
         self.right_joints = [joints[n] for n in self.geometry.right_wheel_joint_names]
         self.wheel_joints = self.left_joints + self.right_joints
-        friction = friction or WheelFriction()
+        self.tyre = tyre or TyreContact()
+        self.coulomb = coulomb
+        # With the tyre model the engine gives the wheels only normal forces and apply_tyre_forces
+        # supplies the rest; with `coulomb` (the uncalibrated plant) the engine's friction does it
+        # all, mu = the tyre's friction x the ground plane's.
         for j in self.wheel_joints:
             p.changeDynamics(
                 self.body,
                 j,
-                lateralFriction=friction.longitudinal,
-                rollingFriction=friction.rolling,
-                spinningFriction=friction.spinning,
-                anisotropicFriction=[1.0, friction.lateral_scale, 1.0],
+                lateralFriction=1.0 if coulomb else 0.0,
+                rollingFriction=0.0,
+                spinningFriction=0.0,
+                anisotropicFriction=[1.0, 1.0, 1.0],
                 physicsClientId=client,
             )
+        self._wheel_axes = [
+            tuple(p.getJointInfo(self.body, j, physicsClientId=client)[13]) for j in self.wheel_joints
+        ]
+        self._wheel_index = {j: i for i, j in enumerate(self.wheel_joints)}
         if payload_kg < 0:
             raise ValueError(f"payload_kg: must be >= 0 kg, got {payload_kg}")
         if payload_kg > 0:
@@ -108,6 +133,7 @@ class HuskyRobot:
             )
         self._inertial_inv = p.invertTransform(*p.getDynamicsInfo(self.body, -1, physicsClientId=client)[3:5])
         self._wheel_command: tuple[float, float, float] | None = None
+        self._side_torques = (0.0, 0.0)
         self.command_wheels(0.0, 0.0, 1.0)
 
     def command_wheels(self, left_radps: float, right_radps: float, torque_limit_nm: float) -> None:
@@ -126,6 +152,110 @@ class HuskyRobot:
             forces=[torque_limit_nm] * len(targets),
             physicsClientId=self.client,
         )
+
+    def drive_wheels(self, left_radps: float, right_radps: float, side_torque_limit_nm: float) -> None:
+        """Wheel speed targets (rad/s) for the next physics step, each side's motor limited to
+        `side_torque_limit_nm` (N m at the wheels, summed over the side's wheels). Call it before
+        every physics step (the engine clears external forces after each)."""
+        if self.coulomb:  # the uncalibrated plant: the engine's velocity motors and friction
+            self.command_wheels(left_radps, right_radps, side_torque_limit_nm / len(self.left_joints))
+            return
+        contacts = self._wheel_contacts()
+        r_eff = self.tyre.rolling_radius_scale * self.geometry.wheel_radius_m
+        speeds, torques = [left_radps, right_radps], [0.0, 0.0]
+        for side in (0, 1):
+            wheels = [c for c in contacts if c.side == side]
+            if wheels:
+                speeds[side], torques[side] = self._side_speed(
+                    wheels, speeds[side], side_torque_limit_nm, r_eff
+                )
+        self._side_torques = (torques[0], torques[1])
+        self.command_wheels(speeds[0], speeds[1], HOLD_TORQUE_NM)
+        cid = self.client
+        for c in contacts:
+            f_long, f_lat = tyre_force(self.tyre, c.normal_n, c.v_long - r_eff * speeds[c.side], c.v_lat)
+            force = (f_long * c.long_x + f_lat * c.lat_x, f_long * c.long_y + f_lat * c.lat_y, 0.0)
+            p.applyExternalForce(self.body, c.link, force, c.point, p.WORLD_FRAME, physicsClientId=cid)
+
+    def _side_speed(
+        self, wheels: list[_WheelContact], target_radps: float, limit_nm: float, r_eff: float
+    ) -> tuple[float, float]:
+        """The speed (rad/s) of one side's wheels (one motor, one belt) and the torque (N m) its
+        motor gives: the target, unless the tyres there need more than the limit; then the speed at
+        which the tyres take exactly the limit (quasi-static in the wheels' spin: an explicit tyre
+        force on a freely spinning wheel is too stiff for one physics step, and oscillated under a
+        payload; the wheels' spin-up is in the drive's lag)."""
+        radius = self.geometry.wheel_radius_m
+
+        def motor_torque(speed: float) -> float:  # rises with speed: the tyres push back harder
+            total = 0.0
+            for c in wheels:
+                total -= radius * tyre_force(self.tyre, c.normal_n, c.v_long - r_eff * speed, c.v_lat)[0]
+            return -total
+
+        need = motor_torque(target_radps)
+        if abs(need) <= limit_nm:
+            return target_radps, need
+        goal = math.copysign(limit_nm, need)
+        # bracket: from the target towards free rolling, where the tyres need no torque
+        other = sum(c.v_long for c in wheels) / (len(wheels) * r_eff)
+        step = other - target_radps or math.copysign(1.0, -need)
+        while (motor_torque(target_radps + step) - goal) * (need - goal) > 0.0:
+            step *= 2.0
+        lo, hi = target_radps, target_radps + step
+        for _ in range(40):
+            mid = 0.5 * (lo + hi)
+            if (motor_torque(mid) - goal) * (need - goal) > 0.0:
+                lo = mid
+            else:
+                hi = mid
+        return 0.5 * (lo + hi), goal
+
+    def _wheel_contacts(self) -> list[_WheelContact]:
+        """Each wheel touching ground-like support: its normal load from the last step's contacts
+        and its hub velocity along and across the wheel, on the ground plane (normal taken as +z)."""
+        cid = self.client
+        loads: dict[int, list[float]] = {}  # wheel link -> [normal load N, N-weighted x, y, z]
+        for c in p.getContactPoints(bodyA=self.body, physicsClientId=cid):
+            link, force = c[3], c[9]
+            if link not in self._wheel_index or c[7][2] < 0.5 or force <= 0.0:
+                continue
+            acc = loads.setdefault(link, [0.0, 0.0, 0.0, 0.0])
+            pos = c[5]
+            acc[0] += force
+            acc[1] += force * pos[0]
+            acc[2] += force * pos[1]
+            acc[3] += force * pos[2]
+        if not loads:
+            return []
+        links = sorted(loads)
+        states = p.getLinkStates(self.body, links, computeLinkVelocity=1, physicsClientId=cid)
+        contacts = []
+        for link, state in zip(links, states, strict=True):
+            normal, px, py, pz = loads[link]
+            index = self._wheel_index[link]
+            ax, ay, _ = _rotate(state[5], self._wheel_axes[index])  # the axle in the world
+            norm = math.hypot(ax, ay)
+            if norm < 1e-6:
+                continue  # axle upright: the wheel lies on its side
+            lat_x, lat_y = ax / norm, ay / norm
+            long_x, long_y = lat_y, -lat_x  # lateral x up: along the wheel's rolling direction
+            vx, vy, _ = state[6]
+            contacts.append(
+                _WheelContact(
+                    link=link,
+                    side=0 if index < len(self.left_joints) else 1,
+                    normal_n=normal,
+                    point=(px / normal, py / normal, pz / normal),
+                    long_x=long_x,
+                    long_y=long_y,
+                    lat_x=lat_x,
+                    lat_y=lat_y,
+                    v_long=vx * long_x + vy * long_y,
+                    v_lat=vx * lat_x + vy * lat_y,
+                )
+            )
+        return contacts
 
     def _base_link(self) -> tuple[tuple[float, ...], tuple[float, ...]]:
         """base_link's position (m) and quaternion, from PyBullet's centre-of-mass frame."""
@@ -151,6 +281,16 @@ class HuskyRobot:
         lin, ang = p.getBaseVelocity(self.body, physicsClientId=self.client)
         yaw = self.pose()[2]
         return np.array([lin[0] * math.cos(yaw) + lin[1] * math.sin(yaw), ang[2]])
+
+    def side_torques(self) -> tuple[float, float]:
+        """Motor torque (N m at the wheels, summed over a side's wheels) of the left and of the right
+        side in the last physics step: on the tyre contact what drive_wheels gave the tyres, on the
+        Coulomb contact what the engine's motors applied."""
+        if not self.coulomb:
+            return self._side_torques
+        states = p.getJointStates(self.body, self.wheel_joints, physicsClientId=self.client)
+        n = len(self.left_joints)
+        return sum(s[3] for s in states[:n]), sum(s[3] for s in states[n:])
 
     def wheel_speeds(self) -> np.ndarray:
         """Measured wheel speeds (rad/s) in the order left joints, right joints."""

@@ -32,6 +32,11 @@ Sources
 [CONTROL2]  Repository ``clearpathrobotics/clearpath_common``,
             ``clearpath_control/config/a200/control.yaml``
             (commit 077ed1c954ee51cf286d60569789057a0d7f0cb0): ROS 2 diff_drive_controller.
+[MOTOR]     The A200's drive (one gearmotor per side, both wheels of a side on one belt): Midwest
+            Motion Products S22-346F-24V with a GP52-079 planetary gearbox (about 78.71:1), 10.7 A
+            continuous, behind a motor controller that limits current at 26 A, as listed for the
+            A200 by Clearpath; torque constant about 0.0445 N m/A as identified by McCormick et
+            al. 2022 (Husky parameter identification). The gearbox efficiency is ours (below).
 [PR36]      husky/husky pull request #36 (https://github.com/husky/husky/pull/36): history of
             the ``inertial_link`` values (an earlier 33.455 kg set had its COM offset on x).
 
@@ -242,6 +247,16 @@ ANGULAR_MAX_VELOCITY_RADPS: float = ROS1_DIFF_DRIVE.angular_max_velocity_radps  
 ANGULAR_MAX_ACCELERATION_RADPS2: float = (
     ROS1_DIFF_DRIVE.angular_max_acceleration_radps2  # [CONTROL]
 )
+
+# [MOTOR] one side's gearmotor
+MOTOR_TORQUE_CONSTANT_NM_PER_A: float = 0.0445  # [MOTOR] McCormick et al. 2022
+MOTOR_GEAR_RATIO: float = 78.71  # [MOTOR] GP52-079 planetary gearbox
+MOTOR_CONTINUOUS_CURRENT_A: float = 10.7  # [MOTOR] rated continuous current
+MOTOR_CURRENT_LIMIT_A: float = 26.0  # [MOTOR] motor controller current limit
+#: Not published: three planetary stages at about 0.9 each (0.9^3 = 0.73), the usual figure for a
+#: three-stage planetary gearhead; the motor currents of the wet-grass recording are checked
+#: against it (tests/calibration).
+MOTOR_GEARBOX_EFFICIENCY: float = 0.73
 
 KNOWN_DISCREPANCIES: tuple[str, ...] = (
     "Mass: [MANUAL] says 50 kg; [URDF] inertial_link 46.034 kg + 4 x 2.637 kg wheels = "

@@ -26,7 +26,7 @@ from husky_sim.realcheck.sweep import (
     PerturbationRanges,
     SampleTask,
     apply_perturbation,
-    nominal_torque_nm,
+    nominal_current_a,
     run_tasks,
     sample_perturbations,
 )
@@ -34,6 +34,7 @@ from husky_sim.runs.run import run_scenario
 from husky_sim.runs.scenario import Scenario, load_scenario
 from husky_sim.sim.geometry import load_geometry
 from husky_sim.sim.sensing import SensingConfig, Sensor
+from husky_sim.sim.tyre import stiffness_ratio_for_yaw_ratio
 
 pytestmark = pytest.mark.physics  # PyBullet or closed loops throughout (`make test-fast` skips)
 
@@ -171,7 +172,10 @@ def test_a_perturbation_changes_only_its_fields() -> None:
     sc = apply_perturbation(base, p)
     assert sc.seed == p.episode_seed
     assert sc.friction.ground == p.ground_friction and sc.robot.payload_kg == p.payload_kg
-    assert sc.drive.wheel_torque_limit_nm == pytest.approx(nominal_torque_nm(base) * p.torque_scale)
+    assert sc.drive.current_limit_a == pytest.approx(nominal_current_a(base) * p.torque_scale)
+    assert sc.friction.lateral_stiffness_ratio == pytest.approx(
+        stiffness_ratio_for_yaw_ratio(p.yaw_ratio, load_geometry())
+    )
     assert sc.sensing.latency_steps == p.latency_steps
     assert sc.sensing.obstacle_velocity_scale == p.obstacle_velocity_scale
     changed = {"name", "description", "seed", "friction", "robot", "drive", "sensing"}
@@ -180,7 +184,6 @@ def test_a_perturbation_changes_only_its_fields() -> None:
         k: v for k, v in after.items() if k not in changed
     }
     assert after["robot"]["start"] == before["robot"]["start"]
-    assert after["friction"]["wheel_longitudinal"] == before["friction"]["wheel_longitudinal"]
 
 
 def test_sensor_scales_the_reported_obstacle_velocity() -> None:

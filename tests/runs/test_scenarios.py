@@ -12,8 +12,8 @@ from controllers import NMPCConfig
 from husky_sim.cli import main
 from husky_sim.runs.scenario import ScenarioError, load_scenario, scenario_from_data, shipped_scenarios
 from husky_sim.sim.episode import EpisodeConfig
+from husky_sim.sim.ground import DEFAULT_GROUND, load_ground
 from husky_sim.sim.outcomes import Outcomes
-from husky_sim.sim.robot import WheelFriction
 from husky_sim.sim.sensing import SensingConfig
 from husky_sim.sim.world import WorldConfig
 
@@ -173,8 +173,8 @@ def test_an_omitted_setting_takes_the_run_time_default() -> None:
     episode = sc.episode_config()
     assert (episode.tau_s, episode.duration_s) == (EpisodeConfig.tau_s, EpisodeConfig.duration_s)
     assert episode.sensing == SensingConfig() and episode.outcomes == Outcomes()
-    assert episode.wheel_friction == WheelFriction()
+    assert episode.ground == load_ground(DEFAULT_GROUND)
     assert (episode.world.physics_hz, episode.world.ground_friction) == (
         WorldConfig.physics_hz,
-        WorldConfig.ground_friction,
+        episode.ground.tyre.friction,
     )

@@ -35,9 +35,46 @@ UNSEEN = sorted((Path(__file__).parent / "scenarios_unseen").glob("*.yaml"))
 HORIZONS = (5, 7, 12)
 
 
+#: Cells husky-cbf does not pass on the calibrated plant (the default ground, wet_grass, since the
+#: skid-steer was calibrated against a real Husky: its drive has a 0.34 s dead time and a 0.1 s lag
+#: that husky-cbf's model leaves out, so it overshoots its goals and reacts late to movers). Measured
+#: outcomes; the issue "husky-cbf, trial-ready" takes them on. Strict: a cell that passes again fails
+#: here until its line is removed.
+FAILING_ON_CALIBRATED_PLANT = {
+    ("dense_random_field", 5): "timeout, min clearance 0.4972 m, final error 0.159 m",
+    ("head_on_moving_obstacle", 5): "timeout, min clearance 0.4576 m, final error 0.081 m",
+    ("husky_circle_tracking", 5): "tracking, min clearance 0.0853 m, final error 0.026 m",
+    ("husky_circle_tracking", 7): "collided, min clearance -0.0005 m, final error 0.445 m",
+    ("husky_circle_tracking", 12): "collided, min clearance -0.0000 m, final error 0.725 m",
+    ("narrow_gap", 5): "timeout, min clearance 0.3039 m, final error 0.766 m",
+    ("narrow_gap", 7): "timeout, min clearance 0.3025 m, final error 0.066 m",
+    ("paper_dynamic_tracking", 5): "tracking, min clearance 0.3894 m, final error 0.133 m",
+    ("paper_dynamic_tracking", 7): "collided, min clearance -0.0000 m, final error 2.8 m",
+    ("paper_dynamic_tracking", 12): "collided, min clearance -0.0000 m, final error 2.937 m",
+    ("paper_dynamic_tracking_crossing", 5): "collided, min clearance -0.0011 m, final error 1.725 m",
+    ("paper_dynamic_tracking_crossing", 7): "collided, min clearance -0.0001 m, final error 2.454 m",
+    ("paper_dynamic_tracking_crossing", 12): "collided, min clearance -0.0000 m, final error 2.201 m",
+    ("paper_point_stabilisation", 5): "timeout, min clearance 0.5001 m, final error 0.185 m",
+    ("crossing_movers_fast", 5): "timeout, min clearance 1.5409 m, final error 0.16 m",
+    ("gap_with_mover", 5): "timeout, min clearance 0.2832 m, final error 1.197 m",
+    ("gap_with_mover", 7): "timeout, min clearance 0.2019 m, final error 0.035 m",
+    ("slalom", 5): "timeout, min clearance 0.1567 m, final error 0.168 m",
+    ("start_near_obstacle", 5): "timeout, min clearance 0.2843 m, final error 1.533 m",
+}
+
+
+def _marks(path: Path, n: int) -> list[pytest.MarkDecorator]:
+    marks = [pytest.mark.slow]
+    measured = FAILING_ON_CALIBRATED_PLANT.get((path.stem, n))
+    if measured is not None:
+        reason = f"fails on the calibrated plant (drive dead time not modelled): {measured}"
+        marks.append(pytest.mark.xfail(strict=True, raises=AssertionError, reason=reason))
+    return marks
+
+
 def _cells(paths: list[Path]) -> list[object]:
     return [
-        pytest.param(str(path), n, id=f"{path.stem}-N{n}", marks=pytest.mark.slow)
+        pytest.param(str(path), n, id=f"{path.stem}-N{n}", marks=_marks(path, n))
         for path in paths
         for n in HORIZONS
     ]

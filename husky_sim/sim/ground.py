@@ -1,0 +1,139 @@
+"""Grounds: named, fitted parameter sets of the tyre contact and of the drive's response, each a
+folder assets/husky_a200/grounds/NAME/ holding ground.yaml and the calibration report it came
+with, both written by `husky-sim calibrate` from a real recording.
+
+A ground file holds `tyre` (husky_sim.sim.tyre.TyreContact) and `drive` (the dead time and lag of
+the wheel speed loop, husky_sim.sim.drive.DriveConfig), fitted together on one recording. A
+scenario names its ground (`ground: wet_grass`, or a path to a file); without one it gets
+DEFAULT_GROUND.
+"""
+
+from __future__ import annotations
+
+import functools
+from dataclasses import asdict, dataclass, field, replace
+from pathlib import Path
+
+import yaml
+
+from husky_sim.paths import ASSETS_DIR
+from husky_sim.sim.tyre import TyreContact
+
+GROUNDS_DIR: Path = ASSETS_DIR / "grounds"
+#: The ground of every scenario that names none: wet grass, the recording with inflated tyres and
+#: logged motor currents (so the motor model is checked on it too); its yaw ratio, 0.52, is in the
+#: middle of the real runs we know (0.43-0.54).
+DEFAULT_GROUND = "wet_grass"
+#: The plant before the calibration (PyBullet's Coulomb friction on the wheels), kept as a ground so
+#: that what changed can be measured against it (`ground: pybullet_coulomb` in a scenario).
+UNCALIBRATED_GROUND = "pybullet_coulomb"
+GROUND_FILE = "ground.yaml"
+
+
+class GroundError(ValueError):
+    """A ground that cannot be loaded; the message is one line."""
+
+
+@dataclass(frozen=True)
+class DriveResponse:
+    """The wheel speed loop's dead time and first-order lag (s), fitted on the same recording."""
+
+    command_delay_s: float = 0.0
+    wheel_time_constant_s: float = 0.0
+
+    def __post_init__(self) -> None:
+        for name in ("command_delay_s", "wheel_time_constant_s"):
+            value = getattr(self, name)
+            if not (0.0 <= value <= 2.0):
+                raise ValueError(f"ground.drive.{name}: must be in [0, 2] s, got {value}")
+
+
+@dataclass(frozen=True)
+class Ground:
+    """One ground: its name, the tyre contact on it and the drive response fitted with it."""
+
+    name: str = "ideal"
+    tyre: TyreContact = field(default_factory=TyreContact)
+    drive: DriveResponse = field(default_factory=DriveResponse)
+    #: "tyre": our slip-dependent tyre force (husky_sim.sim.tyre) and the motor model's torque
+    #: limit; "coulomb": the uncalibrated plant (PyBullet's friction on the wheels, mu = the tyre's
+    #: friction, and `wheel_torque_limit_nm` per wheel), kept only so that old verdicts reproduce
+    contact: str = "tyre"
+    wheel_torque_limit_nm: float | None = None
+
+    def __post_init__(self) -> None:
+        if self.contact not in ("tyre", "coulomb"):
+            raise ValueError(f"ground.contact: must be 'tyre' or 'coulomb', got {self.contact!r}")
+        if (self.contact == "coulomb") != (self.wheel_torque_limit_nm is not None):
+            raise ValueError("ground.wheel_torque_limit_nm: give it with contact 'coulomb' and only then")
+
+    @property
+    def calibrated(self) -> bool:
+        return self.contact == "tyre"
+
+    def to_dict(self) -> dict[str, object]:
+        data: dict[str, object] = {"name": self.name, "tyre": asdict(self.tyre), "drive": asdict(self.drive)}
+        if not self.calibrated:
+            data.update(contact=self.contact, wheel_torque_limit_nm=self.wheel_torque_limit_nm)
+        return data
+
+    @classmethod
+    def from_dict(cls, data: object, source: str) -> Ground:
+        if not isinstance(data, dict):
+            raise GroundError(f"{source}: a ground file is a mapping with name, tyre and drive")
+        allowed = {"name", "tyre", "drive", "fit", "contact", "wheel_torque_limit_nm"}
+        unknown = sorted(set(data) - allowed)
+        if unknown:
+            raise GroundError(f"{source}: unknown key {unknown[0]!r} (allowed: {', '.join(sorted(allowed))})")
+        try:
+            return cls(
+                name=str(data.get("name", Path(source).stem)),
+                tyre=TyreContact(**(data.get("tyre") or {})),
+                drive=DriveResponse(**(data.get("drive") or {})),
+                contact=str(data.get("contact", "tyre")),
+                wheel_torque_limit_nm=data.get("wheel_torque_limit_nm"),
+            )
+        except (TypeError, ValueError) as exc:
+            raise GroundError(f"{source}: {' '.join(str(exc).split())}") from None
+
+
+def with_friction(ground: Ground, friction: float | None) -> Ground:
+    """`ground` with its tyre friction coefficient replaced (None: unchanged)."""
+    if friction is None:
+        return ground
+    return replace(ground, tyre=replace(ground.tyre, friction=friction))
+
+
+def ground_names() -> list[str]:
+    """The shipped grounds' names."""
+    return sorted(path.parent.name for path in GROUNDS_DIR.glob(f"*/{GROUND_FILE}"))
+
+
+def load_ground(name_or_path: str | Path | None = None) -> Ground:
+    """A shipped ground by name (DEFAULT_GROUND when None), or a ground file by path."""
+    return _load_ground(DEFAULT_GROUND if name_or_path is None else str(name_or_path))
+
+
+@functools.lru_cache(maxsize=32)
+def _load_ground(text: str) -> Ground:
+    path = Path(text)
+    if path.suffix not in (".yaml", ".yml"):
+        path = GROUNDS_DIR / text / GROUND_FILE
+        if not path.exists():
+            raise GroundError(
+                f"ground: unknown ground {text!r} (shipped: {', '.join(ground_names())}, or a file)"
+            )
+    try:
+        data = yaml.safe_load(path.read_text())
+    except (OSError, yaml.YAMLError) as exc:
+        raise GroundError(f"{path}: cannot read the ground file ({' '.join(str(exc).split())})") from None
+    return Ground.from_dict(data, str(path))
+
+
+def write_ground(ground: Ground, path: Path, header: str = "", fit: dict[str, object] | None = None) -> None:
+    """Write `ground` as a ground file (with `fit`, the calibration's figures, kept for reading)."""
+    data = ground.to_dict()
+    if fit:
+        data["fit"] = fit
+    comment = "".join(f"# {line}\n" if line else "#\n" for line in header.splitlines())
+    path.write_text(comment + yaml.safe_dump(data, sort_keys=False))
