@@ -61,7 +61,7 @@ class Calibration:
     recording: DriveRecording
     ground: Ground
     results: tuple[StepResult, ...]
-    wheel_times_recorded: StepTimes
+    wheel_times_recorded: StepTimes | None
     wheel_times_simulated: tuple[float | None, float | None]
     yaw_times_recorded: StepTimes | None
 
@@ -158,6 +158,13 @@ def _current_ratio(steps: list[SteadyStep], rows: list[ResponseRow]) -> float | 
     return float(np.exp(np.mean(np.log(per_class)))) if per_class else None
 
 
+def _step_times(recording: DriveRecording, kind: str) -> StepTimes | None:
+    try:
+        return recording.median_step_times(kind)
+    except ValueError:  # the recording has none of that kind
+        return None
+
+
 def drive_targets(wheel: StepTimes, yaw: StepTimes | None) -> StepTimes:
     """Rise times the simulated wheels are fitted to: the recording's wheel times, or, where it has
     body yaw-rate steps too (tile), halfway between the two. The real body lags its wheels by more
@@ -217,12 +224,11 @@ def fit_ground(recording: DriveRecording, base: Ground, name: str, log=print) ->
             factor = float(np.clip(current**1.5, 0.5, 2.0))
             updates["slip_speed_mps"] = float(np.clip(tyre.slip_speed_mps * factor, MIN_SLIP_SPEED_MPS, 5.0))
         tyre = TyreContact(**{**tyre.__dict__, **{key: round(value, 4) for key, value in updates.items()}})
-    wheel_times = recording.median_step_times("wheel")
-    try:
-        yaw_times: StepTimes | None = recording.median_step_times("yaw")
-    except ValueError:
-        yaw_times = None
-    response = fit_drive_response(Ground(name, tyre, base.drive), drive_targets(wheel_times, yaw_times))
+    wheel_times, yaw_times = _step_times(recording, "wheel"), _step_times(recording, "yaw")
+    if wheel_times is None:  # no wheel steps (a bag of commands and odometry): keep the base's
+        response = base.drive
+    else:
+        response = fit_drive_response(Ground(name, tyre, base.drive), drive_targets(wheel_times, yaw_times))
     ground = Ground(name, tyre, response)
     log(
         f"  drive response: delay {response.command_delay_s:.3f} s, "
@@ -298,9 +304,17 @@ def report_lines(cal: Calibration, command: str, figure: str) -> list[str]:
         "",
         "| response | real t63 (s) | sim t63 (s) | real t95 (s) | sim t95 (s) |",
         "|---|---|---|---|---|",
-        f"| wheel speed | {cal.wheel_times_recorded.t63_s:.2f} | {_fmt_time(w_sim[0])} | "
-        f"{cal.wheel_times_recorded.t95_s:.2f} | {_fmt_time(w_sim[1])} |",
     ]
+    if cal.wheel_times_recorded is None:
+        lines.append(
+            f"| wheel speed (not recorded: the base ground's kept) | - | {_fmt_time(w_sim[0])} | - | "
+            f"{_fmt_time(w_sim[1])} |"
+        )
+    else:
+        lines.append(
+            f"| wheel speed | {cal.wheel_times_recorded.t63_s:.2f} | {_fmt_time(w_sim[0])} | "
+            f"{cal.wheel_times_recorded.t95_s:.2f} | {_fmt_time(w_sim[1])} |"
+        )
     if cal.yaw_times_recorded is not None:
         yaw63 = _median([r.sim.t63_yaw_s for r in cal.results if r.step.command_class == "in_place"])
         yaw95 = _median([r.sim.t95_yaw_s for r in cal.results if r.step.command_class == "in_place"])

@@ -208,6 +208,48 @@ def load_drive_recording(path: Path) -> DriveRecording:
     )
 
 
+#: Commands and odometry (a ROS bag): a command must be held this long (s) to give a steady step, whose
+#: steady part is its second half.
+MIN_HOLD_S = 3.0
+
+
+def drive_recording_from_commands(
+    path: str,
+    cmd_t_s: np.ndarray,
+    commands: np.ndarray,
+    pose_t_s: np.ndarray,
+    poses: np.ndarray,
+    wheel_separation_multiplier: float,
+) -> DriveRecording:
+    """Steady steps of a recording that has body commands (v m/s, omega rad/s) and odometry poses
+    (x m, y m, yaw rad) but no wheel speeds (a ROS bag of /cmd_vel and odometry): each command held
+    for MIN_HOLD_S or longer is a step, measured over its second half. The wheels are taken to run at
+    their commands: the wheel-implied body speeds are (v, omega x the drive's separation multiplier),
+    as the Husky's diff_drive controller splits them. No currents and no step responses."""
+    cmd_t, cmd = np.asarray(cmd_t_s, dtype=float), np.asarray(commands, dtype=float).reshape(-1, 2)
+    pose_t, pose = np.asarray(pose_t_s, dtype=float), np.asarray(poses, dtype=float).reshape(-1, 3)
+    changes = [0] + [i for i in range(1, len(cmd)) if not np.array_equal(cmd[i], cmd[i - 1])]
+    ends = [cmd_t[i] for i in changes[1:]] + [float(pose_t[-1])]
+    r, b = RECORDING_WHEEL_RADIUS_M, RECORDING_BASELINE_M
+    steps = []
+    for index, (first, end) in enumerate(zip(changes, ends, strict=True)):
+        start = float(cmd_t[first])
+        if end - start < MIN_HOLD_S:
+            continue
+        inside = (pose_t >= start + 0.5 * (end - start)) & (pose_t < end)
+        if np.count_nonzero(inside) < 5 or np.ptp(pose_t[inside]) < MIN_STEADY_S:
+            continue
+        v, w = cmd[first]
+        half = 0.5 * b * w * wheel_separation_multiplier
+        n = int(np.count_nonzero(inside))
+        left, right = np.full(n, (v - half) / r), np.full(n, (v + half) / r)
+        x, y, yaw = pose[inside].T
+        steps.append(_steady_step(index, -1, pose_t[inside], left, right, x, y, yaw, None, None))
+    if not steps:
+        raise RecordingError(f"{path}: no command is held for {MIN_HOLD_S:g} s or longer: no steady step")
+    return DriveRecording(Path(path).stem, path, tuple(steps), (), ())
+
+
 # --- reading ------------------------------------------------------------------------------------------
 
 

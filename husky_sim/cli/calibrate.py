@@ -21,16 +21,44 @@ def _command_pair(text: str) -> tuple[float, float]:
     return v, w
 
 
+def _load_recording(path: str, cmd_topic: str, odom_topic: str):
+    """A DRIVE recording CSV, or commands and odometry (a ROS 1/2 bag, or a replay CSV t, v, omega,
+    x, y, theta) read by the replay's readers."""
+    from pathlib import Path
+
+    from husky_sim.calibration.recordings import (
+        RecordingError,
+        drive_recording_from_commands,
+        load_drive_recording,
+    )
+    from husky_sim.realcheck.replay import load_recording
+    from husky_sim.sim.drive import DriveConfig
+
+    if Path(path).suffix.lower() == ".csv":
+        try:
+            return load_drive_recording(Path(path))
+        except RecordingError as exc:
+            if "unknown header" not in str(exc):
+                raise
+    replayed = load_recording(Path(path), cmd_topic, odom_topic)
+    multiplier = DriveConfig().wheel_separation_multiplier
+    return drive_recording_from_commands(
+        path, replayed.cmd_t_s, replayed.commands, replayed.pose_t_s, replayed.poses, multiplier
+    )
+
+
 def cmd_calibrate(args: argparse.Namespace) -> int:
     import shlex
     from pathlib import Path
 
     from husky_sim.calibration.fit import fit_ground, write_calibration
-    from husky_sim.calibration.recordings import load_drive_recording
-    from husky_sim.sim.ground import Ground, load_ground
+    from husky_sim.sim.ground import DEFAULT_GROUND, Ground, load_ground
 
-    recording = load_drive_recording(Path(args.recording))
-    base = Ground() if args.base is None else load_ground(args.base)
+    recording = _load_recording(args.recording, args.cmd_topic, args.odom_topic)
+    if args.base is not None:
+        base = load_ground(args.base)
+    else:  # without wheel speeds the drive's response cannot be fitted: keep the default ground's
+        base = Ground() if recording.wheel_step_times else load_ground(DEFAULT_GROUND)
     name = args.name or recording.name
     print(f"{recording.path}: {len(recording.steps)} steady steps; fitting ground {name!r}")
     calibration = fit_ground(recording, base, name)
@@ -65,13 +93,24 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     cal = sub.add_parser(
         "calibrate", help="fit a ground (tyre contact and drive response) to a real Husky drive recording"
     )
-    cal.add_argument("recording", help="a DRIVE recording CSV (wet-grass raw log or tile windows)")
+    cal.add_argument(
+        "recording",
+        help="a DRIVE recording CSV (wet-grass raw log or tile windows), or a ROS 1 .bag / ROS 2 bag "
+        "directory / CSV t,v,omega,x,y,theta of commands and odometry (its wheels taken to follow them)",
+    )
+    cal.add_argument("--cmd-topic", default="/cmd_vel", help="bags: Twist or TwistStamped (default /cmd_vel)")
+    cal.add_argument(
+        "--odom-topic",
+        default="/odometry/filtered",
+        help="bags: nav_msgs/Odometry (default /odometry/filtered)",
+    )
     cal.add_argument("--out", type=path_arg, required=True, help="folder for ground.yaml and calibration.md")
     cal.add_argument("--name", default=None, help="the ground's name (default: the recording's)")
     cal.add_argument(
         "--base",
         default=None,
-        help="ground whose unfitted parameters are kept, where the fit starts (default: tyre defaults)",
+        help="ground whose unfitted parameters are kept, where the fit starts (default: the tyre's defaults; "
+        "for a recording without wheel speeds the default ground, whose drive response is kept)",
     )
     cal.set_defaults(func=cmd_calibrate)
 

@@ -20,6 +20,7 @@ from husky_sim.calibration.fit import wheel_rise_times
 from husky_sim.calibration.recordings import RECORDINGS_DIR, command_class, load_drive_recording
 from husky_sim.cli import main
 from husky_sim.sim.ground import DEFAULT_GROUND, UNCALIBRATED_GROUND, load_ground
+from husky_sim.sim.open_loop import simulate_commands
 
 pytestmark = pytest.mark.physics
 
@@ -160,3 +161,27 @@ def test_calibrate_rejects_a_file_that_is_not_a_recording(
     assert main(["calibrate", str(bad), "--out", str(tmp_path / "out")]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "bad.csv" in err[0], err
+
+
+@pytest.mark.slow
+def test_calibrate_from_a_ros2_bag_recovers_the_ground_that_drove(tmp_path: Path) -> None:
+    """A ROS 2 bag of /cmd_vel and odometry (no wheel speeds) driven on the tile ground, each command
+    held 4 s: `calibrate` (through the replay's readers, the wheels taken to follow their commands)
+    recovers tile's tyre stiffness ratio and rolling radius; the drive response is the base's."""
+    from tests.realcheck.test_replay import write_ros2_bag
+
+    held = [(0.0, 0.4), (0.3, 0.3), (0.0, -0.4), (0.5, 0.2), (0.4, -0.4), (-0.3, 0.3), (0.6, 0.1)]
+    cmd_t = np.arange(len(held)) * 4.0 + 0.003
+    track = simulate_commands(
+        cmd_t, np.array(held), 4.0 * len(held), (0.0, 0.0, 0.0), ground=load_ground("tile")
+    )
+    idx = np.arange(0, len(track.t_s), 12)  # 20 Hz odometry
+    data = {"cmd_t": cmd_t, "commands": np.array(held), "pose_t": track.t_s[idx], "poses": track.poses[idx]}
+    bag = write_ros2_bag(tmp_path / "drive", data)
+    out = tmp_path / "from_bag"
+    assert main(["calibrate", str(bag), "--out", str(out), "--name", "from_bag", "--base", "wet_grass"]) == 0
+    fitted, tile = load_ground(out / "ground.yaml"), load_ground("tile")
+    assert fitted.tyre.lateral_stiffness_ratio == pytest.approx(tile.tyre.lateral_stiffness_ratio, rel=0.1)
+    assert fitted.tyre.rolling_radius_scale == pytest.approx(tile.tyre.rolling_radius_scale, rel=0.03)
+    assert fitted.drive == load_ground("wet_grass").drive
+    assert "not recorded" in (out / "calibration.md").read_text()
