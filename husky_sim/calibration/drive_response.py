@@ -14,6 +14,7 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
+from husky_sim.calibration.recordings import MIN_RATIO_SPEED_MPS, MIN_RATIO_YAW_RADPS, rise_times
 from husky_sim.sim.drive import DriveConfig
 from husky_sim.sim.geometry import load_geometry
 from husky_sim.sim.ground import Ground
@@ -22,9 +23,6 @@ from husky_sim.sim.world import WorldConfig
 
 #: Hold of each command from rest (s): the real recordings hold each command for 6 s.
 HOLD_S = 6.0
-#: Below these the ratios are not defined (None): wheel-implied yaw rate (rad/s), speed (m/s).
-MIN_IMPLIED_YAW_RATE_RADPS = 0.1
-MIN_IMPLIED_SPEED_MPS = 0.1
 
 
 @dataclass(frozen=True)
@@ -52,19 +50,6 @@ def ratio(numerator: float, denominator: float, floor: float) -> float | None:
     return numerator / denominator if abs(denominator) >= floor else None
 
 
-def rise_times(t_s: np.ndarray, signal: np.ndarray, final: float) -> tuple[float | None, float | None]:
-    """First times (s) at which `signal`, starting from 0 at t_s[0], covers 63 % and 95 % of `final`
-    (None if it never does, or `final` is 0)."""
-    if final == 0.0:
-        return None, None
-    progress = np.asarray(signal) / final
-    out = []
-    for level in (0.63, 0.95):
-        above = np.nonzero(progress >= level)[0]
-        out.append(float(t_s[above[0]] - t_s[0]) if len(above) else None)
-    return out[0], out[1]
-
-
 def implied_body_velocity(wheel_speeds: np.ndarray) -> tuple[float, float]:
     """(v m/s, w rad/s) that wheel speeds (rad/s; left joints, then right) imply with the URDF's
     wheel radius and track."""
@@ -81,7 +66,8 @@ def steady_answer(track: SimTrack, command: tuple[float, float], steady_from_s: 
     late = track.t_s >= steady_from_s
     v, w = (float(x) for x in np.mean(track.body_velocity[late], axis=0))
     v_wheels, w_wheels = implied_body_velocity(np.mean(track.wheel_speeds[late], axis=0))
-    t63, t95 = rise_times(track.t_s, track.body_velocity[:, 1], w) if abs(w) > 1e-3 else (None, None)
+    times = rise_times(track.t_s, track.body_velocity[:, 1], 0.0, w) if abs(w) > 1e-3 else None
+    t63, t95 = (None, None) if times is None else (times.t63_s, times.t95_s)
     return ResponseRow(
         v_cmd=float(command[0]),
         w_cmd=float(command[1]),
@@ -89,8 +75,8 @@ def steady_answer(track: SimTrack, command: tuple[float, float], steady_from_s: 
         w=w,
         v_wheels=v_wheels,
         w_wheels=w_wheels,
-        yaw_ratio=ratio(w, w_wheels, MIN_IMPLIED_YAW_RATE_RADPS),
-        forward_ratio=ratio(v, v_wheels, MIN_IMPLIED_SPEED_MPS),
+        yaw_ratio=ratio(w, w_wheels, MIN_RATIO_YAW_RADPS),
+        forward_ratio=ratio(v, v_wheels, MIN_RATIO_SPEED_MPS),
         t63_yaw_s=t63,
         t95_yaw_s=t95,
         current_a=float(np.mean(track.motor_currents[late])),

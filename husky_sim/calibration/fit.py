@@ -24,8 +24,14 @@ from pathlib import Path
 
 import numpy as np
 
-from husky_sim.calibration.drive_response import ResponseRow, rise_times, steady_answer
-from husky_sim.calibration.recordings import COMMAND_CLASSES, DriveRecording, SteadyStep, StepTimes
+from husky_sim.calibration.drive_response import ResponseRow, steady_answer
+from husky_sim.calibration.recordings import (
+    COMMAND_CLASSES,
+    DriveRecording,
+    SteadyStep,
+    StepTimes,
+    rise_times,
+)
 from husky_sim.sim.geometry import load_geometry
 from husky_sim.sim.ground import DriveResponse, Ground, write_ground
 from husky_sim.sim.open_loop import simulate_commands
@@ -143,7 +149,8 @@ def wheel_rise_times(ground: Ground) -> tuple[float | None, float | None]:
         wheel_targets=np.array([[-WHEEL_STEP_RADPS, WHEEL_STEP_RADPS]]),
     )
     right = np.mean(track.wheel_speeds[:, 2:], axis=1)
-    return rise_times(track.t_s, right, float(np.mean(right[-60:])))
+    times = rise_times(track.t_s, right, 0.0, float(np.mean(right[-60:])))
+    return (None, None) if times is None else (times.t63_s, times.t95_s)
 
 
 def _current_ratio(steps: list[SteadyStep], rows: list[ResponseRow]) -> float | None:
@@ -212,6 +219,11 @@ def fit_ground(recording: DriveRecording, base: Ground, name: str, log=print) ->
             f"forward {forward:.3f} ({target_forward:.3f}), current sim / real "
             f"{'-' if current is None else f'{current:.2f}'}"
         )
+        if yaw is None or forward is None or not (0.0 < yaw < 1.0 and forward > 0.0):
+            raise ValueError(
+                f"calibrate: round {round_ + 1}: the simulated steps give yaw ratio {yaw} and forward ratio "
+                f"{forward}; cannot fit (the ground {name!r} does not turn or drive as a skid-steer)"
+            )
         k = tyre.lateral_stiffness_ratio
         c = (1.0 / yaw - 1.0) / k  # yaw ratio = 1 / (1 + c k)
         updates = {

@@ -390,7 +390,7 @@ def _steady_step(
     )
 
 
-def _rise_times(t: np.ndarray, speed: np.ndarray, before: float, after: float) -> StepTimes | None:
+def rise_times(t: np.ndarray, speed: np.ndarray, before: float, after: float) -> StepTimes | None:
     """Times (s, from t[0]) at which `speed` first covers 63 % and 95 % of before -> after; None if never."""
     covered = (speed - before) / (after - before)
     times = []
@@ -488,7 +488,7 @@ def _wheel_step_times(
     for speed in sides:
         before, after = float(np.mean(speed[before_rows])), float(np.mean(speed[steady]))
         if abs(after - before) > MIN_WHEEL_STEP_RADPS:
-            times = _rise_times(t[run], speed[run], before, after)
+            times = rise_times(t[run], speed[run], before, after)
             if times is not None:
                 found.append(times)
     return found

@@ -118,7 +118,9 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
         "drive-response", help="hold commands from rest on a ground; print the simulated Husky's answer"
     )
     resp.add_argument(
-        "--ground", default=None, help="a shipped ground's name or a ground file (default: default)"
+        "--ground",
+        default=None,
+        help="a shipped ground's name or a ground file (default: the default ground)",
     )
     resp.add_argument(
         "--payload-kg", type=number_in(float, 0.0, 200.0), default=0.0, metavar="KG", help="payload (kg)"

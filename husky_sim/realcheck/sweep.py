@@ -40,6 +40,7 @@ import numpy as np
 from husky_sim.runs.parallel import Backend, parallel_map
 from husky_sim.runs.scenario import Scenario, scenario_from_data
 from husky_sim.sim.geometry import load_geometry
+from husky_sim.sim.ground import load_ground
 from husky_sim.sim.tyre import stiffness_ratio_for_yaw_ratio
 
 #: Per-sample result keys that are wall-clock measurements (excluded from determinism checks).
@@ -50,7 +51,8 @@ WALL_CLOCK_KEYS = ("solve_ms_median", "solve_ms_p95", "solve_ms_max", "wall_time
 class PerturbationRanges:
     """Uniform sampling ranges (low, high) of the real-world differences; all defaults live here.
 
-    Absolute values replace the scenario's own (friction, payload, latency, noise); the two
+    Absolute values replace the scenario's own (friction, payload, latency, noise, yaw ratio: the
+    last on a calibrated ground only, the uncalibrated one has no tyre stiffness); the two
     factors are relative to the scenario's nominal value (torque limit, reported obstacle speed).
     """
 
@@ -123,11 +125,11 @@ def sample_perturbations(ranges: PerturbationRanges, count: int, seed: int) -> l
                 "obstacle_xy_std_m",
                 "obstacle_velocity_scale",
                 "torque_scale",
-                "yaw_ratio",
             )
         }
         low, high = ranges.latency_steps
         latency = int(rng.integers(int(low), int(high) + 1))
+        uniform["yaw_ratio"] = float(rng.uniform(*ranges.yaw_ratio))  # drawn last: the others as before
         out.append(Perturbation(index=i, episode_seed=episode_seed, latency_steps=latency, **uniform))
     return out
 
@@ -146,7 +148,12 @@ def apply_perturbation(scenario: Scenario, p: Perturbation) -> Scenario:
     data["friction"]["ground"] = p.ground_friction
     data["robot"]["payload_kg"] = p.payload_kg
     data["drive"]["current_limit_a"] = nominal_current_a(scenario) * p.torque_scale
-    data["friction"]["lateral_stiffness_ratio"] = stiffness_ratio_for_yaw_ratio(p.yaw_ratio, load_geometry())
+    ground = load_ground(scenario.ground)
+    if ground.calibrated:  # the uncalibrated plant has no tyre stiffness to set
+        rolling = ground.tyre.rolling_radius_scale
+        data["friction"]["lateral_stiffness_ratio"] = stiffness_ratio_for_yaw_ratio(
+            p.yaw_ratio, load_geometry(), rolling
+        )
     data["sensing"].update(
         latency_steps=p.latency_steps,
         pose_xy_std_m=p.pose_xy_std_m,

@@ -416,7 +416,12 @@ class Scenario(_Strict):
 
     @model_validator(mode="after")
     def _ground_known(self) -> Scenario:
-        load_ground(self.ground)  # a GroundError (a ValueError) names the ground and what is wrong
+        ground = load_ground(self.ground)  # a GroundError (a ValueError) names the ground and what is wrong
+        if not ground.calibrated and self.friction.lateral_stiffness_ratio is not None:
+            raise ValueError(
+                f"friction.lateral_stiffness_ratio: ground {self.ground!r} has no tyre model (contact "
+                f"{ground.contact!r}); use a calibrated ground or leave it out"
+            )
         return self
 
     @model_validator(mode="after")

@@ -68,7 +68,7 @@ class MotorConfig:
         summed over its wheels) at the side's wheel speed (rad/s): the current that gives the
         torque while the motor drives (torque along the rotation), 0 while it brakes (the real
         Husky's log reads about 0 A on the inner side of every arc: wet_grass_raw.csv)."""
-        if side_torque_nm * side_speed_radps <= 0.0:
+        if side_torque_nm * side_speed_radps < 0.0:
             return 0.0
         return abs(side_torque_nm) / self.newton_metres_per_amp
 
@@ -132,6 +132,7 @@ class SkidSteerDrive:
         self._applied = (0.0, 0.0)
         self._pending.clear()
         self._targets = (0.0, 0.0)
+        self._delay_steps = -1
 
     @property
     def applied(self) -> np.ndarray:

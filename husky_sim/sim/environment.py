@@ -39,7 +39,7 @@ CLEARANCE_PREFILTER_MARGIN_M = 0.02
 
 
 class HuskyEnvironment:
-    """One episode's simulated Husky (EpisodeConfig: world, start, drive, wheel friction, payload,
+    """One episode's simulated Husky (EpisodeConfig: world, start, drive, ground, payload,
     sensing and its seed), a husky_sim.sim.rollout.Plant. Call `close` (or use it as a context
     manager) to free the world."""
 

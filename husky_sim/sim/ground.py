@@ -3,9 +3,9 @@ folder assets/husky_a200/grounds/NAME/ holding ground.yaml and the calibration r
 with, both written by `husky-sim calibrate` from a real recording.
 
 A ground file holds `tyre` (husky_sim.sim.tyre.TyreContact) and `drive` (the dead time and lag of
-the wheel speed loop, husky_sim.sim.drive.DriveConfig), fitted together on one recording. A
-scenario names its ground (`ground: wet_grass`, or a path to a file); without one it gets
-DEFAULT_GROUND.
+the wheel speed loop: DriveResponse, which husky_sim.sim.drive.SkidSteerDrive applies), fitted
+together on one recording. A scenario names its ground (`ground: wet_grass`, or a path to a file);
+without one it gets DEFAULT_GROUND.
 """
 
 from __future__ import annotations
@@ -44,7 +44,7 @@ class DriveResponse:
     def __post_init__(self) -> None:
         for name in ("command_delay_s", "wheel_time_constant_s"):
             value = getattr(self, name)
-            if not (0.0 <= value <= 2.0):
+            if isinstance(value, bool) or not isinstance(value, int | float) or not (0.0 <= value <= 2.0):
                 raise ValueError(f"ground.drive.{name}: must be in [0, 2] s, got {value}")
 
 
@@ -66,6 +66,11 @@ class Ground:
             raise ValueError(f"ground.contact: must be 'tyre' or 'coulomb', got {self.contact!r}")
         if (self.contact == "coulomb") != (self.wheel_torque_limit_nm is not None):
             raise ValueError("ground.wheel_torque_limit_nm: give it with contact 'coulomb' and only then")
+        limit = self.wheel_torque_limit_nm
+        if limit is not None and not (
+            isinstance(limit, int | float) and not isinstance(limit, bool) and 0.0 < limit <= 500.0
+        ):
+            raise ValueError(f"ground.wheel_torque_limit_nm: must be a number in (0, 500] N m, got {limit!r}")
 
     @property
     def calibrated(self) -> bool:
@@ -111,18 +116,26 @@ def ground_names() -> list[str]:
 
 def load_ground(name_or_path: str | Path | None = None) -> Ground:
     """A shipped ground by name (DEFAULT_GROUND when None), or a ground file by path."""
-    return _load_ground(DEFAULT_GROUND if name_or_path is None else str(name_or_path))
+    text = DEFAULT_GROUND if name_or_path is None else str(name_or_path)
+    path = Path(text)
+    try:
+        if path.suffix not in (".yaml", ".yml"):
+            path = GROUNDS_DIR / text / GROUND_FILE
+            if not path.exists():
+                shipped = ", ".join(ground_names())
+                raise GroundError(f"ground: unknown ground {text!r} (shipped: {shipped}, or a .yaml file)")
+        resolved = path.resolve()
+        stamp = resolved.stat().st_mtime_ns
+    except OSError as exc:
+        raise GroundError(f"ground: cannot read {text!r} ({exc.strerror or exc})") from None
+    return _load_ground(str(resolved), stamp)
 
 
 @functools.lru_cache(maxsize=32)
-def _load_ground(text: str) -> Ground:
-    path = Path(text)
-    if path.suffix not in (".yaml", ".yml"):
-        path = GROUNDS_DIR / text / GROUND_FILE
-        if not path.exists():
-            raise GroundError(
-                f"ground: unknown ground {text!r} (shipped: {', '.join(ground_names())}, or a file)"
-            )
+def _load_ground(resolved: str, stamp_ns: int) -> Ground:
+    """The ground file at `resolved`, read once per modification time (a file that `calibrate`
+    rewrites in the same process is read again)."""
+    path = Path(resolved)
     try:
         data = yaml.safe_load(path.read_text())
     except (OSError, yaml.YAMLError) as exc:

@@ -1,7 +1,9 @@
-"""The Husky A200 body in a PyBullet world: loading, wheel friction, motors and state readout.
+"""The Husky A200 body in a PyBullet world: loading, the wheels on the ground (our tyre force, or
+PyBullet's Coulomb friction for the uncalibrated plant), motors and state readout.
 
 Pose is that of base_link (PyBullet reports the base's inertial frame, offset from base_link by the
-chassis centre of mass); yaw in (-pi, pi]. Wheels run in velocity control with a torque limit.
+chassis centre of mass); yaw in (-pi, pi]. Wheels run in velocity control at the speed drive_wheels
+chooses.
 """
 
 from __future__ import annotations
@@ -98,9 +100,9 @@ class HuskyRobot:
         self.wheel_joints = self.left_joints + self.right_joints
         self.tyre = tyre or TyreContact()
         self.coulomb = coulomb
-        # With the tyre model the engine gives the wheels only normal forces and apply_tyre_forces
+        # With the tyre model the engine gives the wheels only normal forces and drive_wheels
         # supplies the rest; with `coulomb` (the uncalibrated plant) the engine's friction does it
-        # all, mu = the tyre's friction x the ground plane's.
+        # all, mu = 1 x the ground plane's (WorldConfig.ground_friction).
         for j in self.wheel_joints:
             p.changeDynamics(
                 self.body,
@@ -198,9 +200,12 @@ class HuskyRobot:
             return target_radps, need
         goal = math.copysign(limit_nm, need)
         # bracket: from the target towards free rolling, where the tyres need no torque
+        # (the torque rises with speed: to lower it, step down in speed when it is positive)
         other = sum(c.v_long for c in wheels) / (len(wheels) * r_eff)
-        step = other - target_radps or math.copysign(1.0, -need)
-        while (motor_torque(target_radps + step) - goal) * (need - goal) > 0.0:
+        step = math.copysign(max(abs(other - target_radps), 0.1), -need)
+        for _ in range(60):  # the tyres' torque is bounded by mu N r: the goal lies within reach
+            if (motor_torque(target_radps + step) - goal) * (need - goal) <= 0.0:
+                break
             step *= 2.0
         lo, hi = target_radps, target_radps + step
         for _ in range(40):

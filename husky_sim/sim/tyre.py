@@ -49,17 +49,20 @@ class TyreContact:
         }
         for name, (lo, hi) in bounds.items():
             value = getattr(self, name)
-            if not (math.isfinite(value) and lo <= value <= hi):
+            real = isinstance(value, int | float) and not isinstance(value, bool)
+            if not (real and math.isfinite(value) and lo <= value <= hi):
                 raise ValueError(f"ground.tyre.{name}: must be in [{lo:g}, {hi:g}], got {value}")
 
 
-def stiffness_ratio_for_yaw_ratio(yaw_ratio: float, geometry: RobotGeometry) -> float:
+def stiffness_ratio_for_yaw_ratio(
+    yaw_ratio: float, geometry: RobotGeometry, rolling_radius_scale: float
+) -> float:
     """The lateral / longitudinal stiffness k whose linear contact gives the steady yaw ratio
-    `yaw_ratio` = b^2 / (b^2 + k a^2) (a half the wheelbase, b half the track; exact while the tyres
-    do not saturate, within about 0.02 of what the simulator shows on the shipped grounds)."""
-    if not 0.0 < yaw_ratio < 1.0:
-        raise ValueError(f"yaw_ratio: must be in (0, 1), got {yaw_ratio}")
-    return (1.0 / yaw_ratio - 1.0) * (geometry.track_width_m / geometry.wheelbase_m) ** 2
+    `yaw_ratio` = s b^2 / (b^2 + k a^2) (a half the wheelbase, b half the track, s the rolling-radius
+    scale: the ratio is taken against the URDF radius). Exact while the tyres do not saturate."""
+    if not 0.0 < yaw_ratio < rolling_radius_scale:
+        raise ValueError(f"yaw_ratio: must be in (0, {rolling_radius_scale:g}), got {yaw_ratio}")
+    return (rolling_radius_scale / yaw_ratio - 1.0) * (geometry.track_width_m / geometry.wheelbase_m) ** 2
 
 
 def tyre_force(

@@ -5,7 +5,7 @@ omega_applied the drive's rate-limited yaw-rate command (husky_sim.sim.drive.Ski
 rad/s), omega_body the measured body yaw rate (rad/s), K the steady-state gain (dimensionless) and
 T the time constant (s). Discretised exactly with omega_applied held between samples (zero-order
 hold). `identify_in_simulation` drives the simulated Husky through yaw-rate steps and fits one
-(K, T) to all of them; `fit_yaw_response` fits a recorded signal (husky-sim replay --fit).
+(K, T) to all of them; `fit_yaw_response` fits a recorded signal (husky-sim replay).
 """
 
 from __future__ import annotations
@@ -30,7 +30,7 @@ DEFAULT_FILE: Path = ASSETS_DIR / "yaw_response.yaml"
 GAIN_BOUNDS = (0.05, 2.0)
 TIME_CONSTANT_BOUNDS_S = (0.01, 10.0)
 #: Starting points (gain, time constant s) of the fit; the best local minimum is kept (a simulated
-#: skid-steer turn stick-slips, so the output error can have more than one).
+#: skid-steer turn's yaw rate swings about the lag's curve, so the output error can have more than one).
 FIT_STARTS = ((0.5, 0.5), (0.3, 0.2), (1.0, 0.2), (0.3, 2.0), (1.0, 2.0))
 #: A signal whose applied yaw rate never exceeds this (rad/s) does not identify a gain.
 MIN_EXCITATION_RADPS = 0.05

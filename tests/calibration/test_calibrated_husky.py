@@ -185,3 +185,26 @@ def test_calibrate_from_a_ros2_bag_recovers_the_ground_that_drove(tmp_path: Path
     assert fitted.tyre.rolling_radius_scale == pytest.approx(tile.tyre.rolling_radius_scale, rel=0.03)
     assert fitted.drive == load_ground("wet_grass").drive
     assert "not recorded" in (out / "calibration.md").read_text()
+
+
+def test_a_scenario_names_its_ground_and_bad_grounds_are_one_line_errors(tmp_path: Path) -> None:
+    from husky_sim.runs.scenario import ScenarioError, load_scenario, scenario_from_data
+
+    data = load_scenario("husky_point_stabilisation").model_dump(mode="json")
+    assert data["ground"] == DEFAULT_GROUND
+    tile = scenario_from_data({**data, "ground": "tile"}, "test").episode_config()
+    assert tile.ground == load_ground("tile") and tile.world.ground_friction == tile.ground.tyre.friction
+    bad_tyre = tmp_path / "bad.yaml"
+    bad_tyre.write_text("name: bad\ntyre: {slip_speed_mps: 0}\n")
+    cases = [
+        ({"ground": "nope"}, "unknown ground 'nope'"),
+        ({"ground": str(bad_tyre)}, "ground.tyre.slip_speed_mps: must be in [0.01, 5]"),
+        (
+            {"ground": UNCALIBRATED_GROUND, "friction": {"lateral_stiffness_ratio": 1.0}},
+            "friction.lateral_stiffness_ratio: ground 'pybullet_coulomb' has no tyre model",
+        ),
+    ]
+    for override, message in cases:
+        with pytest.raises(ScenarioError) as exc:
+            scenario_from_data({**data, **override}, "test")
+        assert message in str(exc.value) and "\n" not in str(exc.value), str(exc.value)

@@ -33,6 +33,7 @@ from husky_sim.realcheck.sweep import (
 from husky_sim.runs.run import run_scenario
 from husky_sim.runs.scenario import Scenario, load_scenario
 from husky_sim.sim.geometry import load_geometry
+from husky_sim.sim.ground import load_ground
 from husky_sim.sim.sensing import SensingConfig, Sensor
 from husky_sim.sim.tyre import stiffness_ratio_for_yaw_ratio
 
@@ -174,7 +175,9 @@ def test_a_perturbation_changes_only_its_fields() -> None:
     assert sc.friction.ground == p.ground_friction and sc.robot.payload_kg == p.payload_kg
     assert sc.drive.current_limit_a == pytest.approx(nominal_current_a(base) * p.torque_scale)
     assert sc.friction.lateral_stiffness_ratio == pytest.approx(
-        stiffness_ratio_for_yaw_ratio(p.yaw_ratio, load_geometry())
+        stiffness_ratio_for_yaw_ratio(
+            p.yaw_ratio, load_geometry(), load_ground(base.ground).tyre.rolling_radius_scale
+        )
     )
     assert sc.sensing.latency_steps == p.latency_steps
     assert sc.sensing.obstacle_velocity_scale == p.obstacle_velocity_scale

@@ -1,6 +1,6 @@
 """The yaw-rate lag (husky_sim.sim.yaw_response): exact discretisation, recovery of known parameters,
 identification in real PyBullet physics (no mocks), the scenario schema's `robot.yaw_response`,
-and `husky-sim replay --fit` reporting the recording's lag."""
+and `husky-sim replay` reporting the recording's lag."""
 
 from __future__ import annotations
 
@@ -45,9 +45,10 @@ from tests.realcheck.test_replay import ODOM_EVERY_STEPS, SEGMENTS, START, TRUE,
 TRUE_LAG = YawResponse(gain=0.55, time_constant_s=0.8)
 NOISE_RADPS = 0.02
 GAIN_TOL, TIME_CONSTANT_TOL_S = 0.02, 0.05
-#: `husky-sim identify` measured here: gain 0.485, time constant 0.364 s, rms 0.2035 rad/s over the
-#: 12 steps (per step 0.090 to 0.286 rad/s: the simulated skid-steer turn stick-slips, so its yaw
-#: rate swings about the lag's curve, more at larger commanded rates). Bounds with some headroom;
+#: `husky-sim identify` measured here on the calibrated default ground: gain 0.877, time constant
+#: 0.500 s, rms 0.152 rad/s over the 12 steps (a first-order lag absorbs the drive's dead time, and
+#: the 1.2 rad/s steps saturate the tyres; 0.485, 0.364 s and 0.2035 on the uncalibrated plant).
+#: Bounds with some headroom;
 #: a broken identification (sign error, wrong sampling, fit stuck at a bound) exceeds them.
 IDENTIFIED_RMS_MAX_RADPS = 0.25
 IDENTIFIED_STEP_RMS_MAX_RADPS = 0.35
