@@ -132,9 +132,10 @@ def test_every_number_rejects_non_finite_and_coerced_values(
 ) -> None:
     path, kind = path_kind
     if bad is None and (
-        path[0] == "drive" or path[-1] in ("heading_rad", "speed_mps", "radius_margin_m", "radius_m")
+        path[0] in ("drive", "friction")
+        or path[-1] in ("heading_rad", "speed_mps", "radius_margin_m", "radius_m")
     ):
-        return  # None means "not given" (the default) for these optional fields
+        return  # None means "not given" for these optional fields (for friction: the ground's own)
     data = _set(_base_for(path), path, bad)
     with pytest.raises(ScenarioError) as exc:
         load_scenario(str(_write(tmp_path, data)))
