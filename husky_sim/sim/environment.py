@@ -82,6 +82,10 @@ class HuskyEnvironment:
         """The four wheels' speeds (rad/s) [l1, l2, r1, r2]."""
         return self.robot.wheel_speeds()
 
+    def motor_currents(self) -> np.ndarray:
+        """The left and right motor currents (A) in the last physics step (husky_sim.sim.drive)."""
+        return np.array(self.drive.motor_currents(self.robot))
+
     def obstacle_centres(self, t_s: float) -> np.ndarray:
         """True obstacle centres (m), shape (n, 2), at time t_s (s)."""
         return self.world.obstacle_centres(t_s)

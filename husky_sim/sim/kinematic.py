@@ -135,6 +135,9 @@ class KinematicEnvironment:
     def wheel_speeds(self) -> np.ndarray:
         return np.full(4, np.nan)
 
+    def motor_currents(self) -> np.ndarray:
+        return np.full(2, np.nan)
+
     def measure(self) -> Measurement:
         """The exact state and the obstacles at the current time."""
         return Measurement(self._state, obstacles_at(self._obstacles, self._k * self.tau_s))

@@ -49,6 +49,10 @@ class Plant(Protocol):
         """Wheel speeds (rad/s) [l1, l2, r1, r2]; NaN where the plant has no wheels."""
         ...
 
+    def motor_currents(self) -> np.ndarray:
+        """The left and right motor currents (A) in the last physics step; NaN without motors."""
+        ...
+
     def measure(self) -> Measurement:
         """What the controller is told now (pose and obstacles, as sensed)."""
         ...
@@ -118,6 +122,7 @@ def rollout(
             interrupts.check()  # also a signal that a library swallowed
             t = k * tau_s
             pose, body, wheels = plant.pose(), plant.body_velocity(), plant.wheel_speeds()
+            currents = plant.motor_currents()
             measurement = plant.measure()
             result = controller.solve(measurement.pose, reference, measurement.obstacles, t)
             deadline_miss = deadline_mode and result.solve_time_s > tau_s
@@ -130,7 +135,7 @@ def rollout(
             reachable = reference_reachable(
                 ref_now[:2], centres, plant.obstacle_radii_m, plant.footprint_radius_m
             )
-            row = _row(k, t, pose, body, wheels, ref_now, command, applied, clearance, reachable)
+            row = _row(k, t, pose, body, wheels, currents, ref_now, command, applied, clearance, reachable)
             row.update(_solve_columns(result, deadline_miss))
             with interrupts.deferred():  # a row is written whole or not at all
                 if log is not None:
@@ -163,6 +168,7 @@ def _row(
     pose: np.ndarray,
     body: np.ndarray,
     wheels: np.ndarray,
+    currents: np.ndarray,
     ref_now: np.ndarray,
     command: np.ndarray,
     applied: np.ndarray,
@@ -189,6 +195,8 @@ def _row(
         "wheel_l2_radps": float(wheels[1]),
         "wheel_r1_radps": float(wheels[2]),
         "wheel_r2_radps": float(wheels[3]),
+        "motor_left_a": float(currents[0]),
+        "motor_right_a": float(currents[1]),
         "clearance_m": clearance,
         "ref_reachable": int(reachable),
     }

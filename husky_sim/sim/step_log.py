@@ -34,6 +34,8 @@ LOG_COLUMNS = (
     "wheel_l2_radps",
     "wheel_r1_radps",
     "wheel_r2_radps",
+    "motor_left_a",
+    "motor_right_a",
     "clearance_m",
     "ref_reachable",
     "s_h_min",

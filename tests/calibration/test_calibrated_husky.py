@@ -208,3 +208,23 @@ def test_a_scenario_names_its_ground_and_bad_grounds_are_one_line_errors(tmp_pat
         with pytest.raises(ScenarioError) as exc:
             scenario_from_data({**data, **override}, "test")
         assert message in str(exc.value) and "\n" not in str(exc.value), str(exc.value)
+
+
+def test_the_run_log_has_the_motor_currents(tmp_path: Path) -> None:
+    """Each control step's row carries the left and right motor currents (A): a turn in place on the
+    default ground draws current on both sides, as the recording's in-place steps do."""
+    import csv
+
+    from controllers import NMPCConfig, NMPCController, SetPoint
+    from husky_sim.sim.episode import EpisodeConfig, run_episode
+
+    log = tmp_path / "log.csv"
+    turn = SetPoint(0.0, 0.0, 3.0)  # a turn in place to face backwards
+    config = EpisodeConfig(start=(0.0, 0.0, 0.0), tau_s=0.1, duration_s=3.0)
+    run_episode(NMPCController(NMPCConfig(safety="none")), turn, config, log)
+    with log.open() as handle:
+        rows = list(csv.DictReader(handle))
+    left = [float(r["motor_left_a"]) for r in rows]
+    right = [float(r["motor_right_a"]) for r in rows]
+    assert all(a >= 0.0 for a in left + right)
+    assert max(left) > 3.0 and max(right) > 3.0, (max(left), max(right))
