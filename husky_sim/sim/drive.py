@@ -33,7 +33,7 @@ if TYPE_CHECKING:
 @dataclass(frozen=True)
 class MotorConfig:
     """One side's gearmotor and its controller (husky_sim.sim.specs, [MOTOR]); it drives the side's
-    two wheels, each taking half its torque."""
+    two wheels through one belt, at one speed (husky_sim.sim.robot.HuskyRobot.drive_wheels)."""
 
     torque_constant_nm_per_a: float = specs.MOTOR_TORQUE_CONSTANT_NM_PER_A  # N m / A
     gear_ratio: float = specs.MOTOR_GEAR_RATIO  # motor turns per wheel turn
@@ -59,9 +59,9 @@ class MotorConfig:
         return self.torque_constant_nm_per_a * self.gear_ratio * self.gearbox_efficiency
 
     @property
-    def wheel_torque_limit_nm(self) -> float:
-        """Torque limit (N m) of one wheel at the controller's current limit."""
-        return self.current_limit_a * self.newton_metres_per_amp / self.wheels_per_motor
+    def side_torque_limit_nm(self) -> float:
+        """Torque limit (N m at the wheels, summed over the side's wheels) at the current limit."""
+        return self.current_limit_a * self.newton_metres_per_amp
 
     def current_a(self, side_torque_nm: float, side_speed_radps: float) -> float:
         """Motor current (A) as the motor controller reports it, for the side's wheel torque (N m,
@@ -96,11 +96,6 @@ class DriveConfig:
             if not (value > 0 and math.isfinite(value)):
                 raise ValueError(f"drive.{name}: must be > 0 and finite, got {value}")
 
-    @property
-    def wheel_torque_limit_nm(self) -> float:
-        """Torque limit (N m) of one wheel: half its side's gearmotor at the current limit."""
-        return self.motor.wheel_torque_limit_nm
-
 
 class SkidSteerDrive:
     """Velocity and acceleration limiting plus skid-steer wheel-speed mapping."""
@@ -116,7 +111,7 @@ class SkidSteerDrive:
         self.response = ground.drive if ground is not None else DriveResponse()
         motor = config.motor
         #: torque limit of one side's motor at its wheels (N m)
-        self.side_torque_limit_nm = motor.wheel_torque_limit_nm * motor.wheels_per_motor
+        self.side_torque_limit_nm = motor.side_torque_limit_nm
         if ground is not None and ground.wheel_torque_limit_nm is not None:
             # the uncalibrated plant's per-wheel literal, scaled as the current limit is (the check)
             scale = motor.current_limit_a / specs.MOTOR_CURRENT_LIMIT_A
