@@ -160,11 +160,15 @@ class _TraceRecorder:
         self._take()
 
     def _take(self) -> None:
+        """One sample, appended whole: a signal may raise after any PyBullet call, and columns of
+        different lengths would make the interrupted run's trace (and its summary) unsavable."""
         pos, orn = self._robot.base_com_pose()
-        self._t.append(self._world.time_s)
-        self._pos.append(tuple(pos))
-        self._orn.append(tuple(orn))
-        self._obs.append(self._world.obstacle_centres())  # a fresh array each call
+        t_s, centres = self._world.time_s, self._world.obstacle_centres()  # a fresh array each call
+        with interrupts.deferred():
+            self._t.append(t_s)
+            self._pos.append(tuple(pos))
+            self._orn.append(tuple(orn))
+            self._obs.append(centres)
 
     def sample(self) -> None:
         self._count += 1

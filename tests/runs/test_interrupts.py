@@ -26,10 +26,11 @@ from controllers import NMPCConfig, NMPCController, Obstacle, SetPoint
 from controllers.config import SolverOptions
 from husky_sim import interrupts
 from husky_sim.runs.parallel import process_map
-from husky_sim.runs.scenario import resolve
+from husky_sim.runs.scenario import load_scenario, resolve
 from husky_sim.scenario_file import scenario_yaml
 from husky_sim.sim.episode import EpisodeConfig, run_episode
 from husky_sim.sim.outcomes import Outcomes, is_stuck_window
+from husky_sim.sim.world import World
 
 pytestmark = pytest.mark.physics  # PyBullet or closed loops throughout (`make test-fast` skips)
 
@@ -277,3 +278,38 @@ def test_a_dead_worker_comes_back_as_an_error_in_its_place() -> None:
     assert len(results) == 2 and isinstance(results[1], BaseException)
     assert results[0] == 4 or isinstance(results[0], BaseException)  # the broken pool may take it too
     assert process_map(_square_or_die, [1, 2, 3], jobs=1) == [1, 4, 9]
+
+
+def test_a_signal_at_any_physics_step_leaves_a_whole_trace(tmp_path: Path, monkeypatch) -> None:
+    """A signal lands wherever Python happens to be; here right after the trace's obstacle sample
+    returns from PyBullet, mid-way through recording one trace sample (CI caught it there once,
+    under load: the trace's columns came out of different lengths, the run failed to save and
+    left no summary). The interrupted episode must still return a trace whose columns agree."""
+    real = World.obstacle_centres
+    calls = {"n": 0}
+
+    def signal_in_the_40th_sample(self, t_s=None):
+        centres = real(self, t_s)
+        calls["n"] += sys._getframe(1).f_code.co_name == "_take"  # the trace recorder's sample
+        if calls["n"] == 40:
+            signal.raise_signal(signal.SIGINT)  # our handler raises here, as after any C call
+        return centres
+
+    monkeypatch.setattr(World, "obstacle_centres", signal_in_the_40th_sample)
+    scenario = load_scenario(resolve("husky_circle_tracking")).with_overrides(5, None, None)
+    previous = interrupts.install()
+    interrupts.begin_run()
+    try:
+        result = run_episode(
+            scenario.make_controller("cbf"),
+            scenario.reference_object(),
+            scenario.episode_config(),
+            tmp_path / "log.csv",
+        )
+    finally:
+        interrupts.restore(previous)
+        interrupts.reset()
+    assert result.interrupted_by == signal.SIGINT and result.metrics.outcome == "interrupted"
+    trace = result.trace
+    assert len(trace.sample_t_s) == len(trace.base_position_m) == len(trace.base_orientation_xyzw)
+    assert len(trace.obstacle_xy_m) == len(trace.sample_t_s)
