@@ -28,7 +28,8 @@ def _non_negative(name: str, value: float) -> None:
 @dataclass(frozen=True)
 class RobotResponse:
     """How the drive follows a command: acceleration limits (m/s^2, rad/s^2) of the commanded
-    velocities, the body yaw rate's first-order lag behind the commanded yaw rate,
+    velocities, the drive's dead time command_delay_s (s) before it acts on a command, the body yaw
+    rate's first-order lag behind the (delayed) commanded yaw rate,
     d(omega_body)/dt = (yaw_gain * omega_cmd - omega_body) / yaw_time_constant_s, and the wheel
     drive's linear velocity limit max_linear_mps (m/s); each side's wheels run at
     v -+ half_separation_m * omega_cmd (m/s, with the drive's effective separation), which
@@ -40,6 +41,7 @@ class RobotResponse:
     yaw_time_constant_s: float
     half_separation_m: float
     max_linear_mps: float
+    command_delay_s: float = 0.0
 
     def __post_init__(self) -> None:
         for name in (
@@ -51,6 +53,7 @@ class RobotResponse:
             "max_linear_mps",
         ):
             _positive(f"response.{name}", getattr(self, name))
+        _non_negative("response.command_delay_s", self.command_delay_s)
 
 
 @dataclass(frozen=True)
@@ -184,10 +187,12 @@ class HuskyCBFConfig:
     footprint: Footprint
     omega_cmd_max_radps: float = 2.0  # commanded yaw-rate bound (the Husky's drive limit, rad/s)
     #: each side's wheel speed at most this times the drive's linear limit (response's
-    #: max_linear_mps): beyond it a skid-steer no longer does what a unicycle would (commanded
-    #: 1 m/s and 2 rad/s, wheels at 2 m/s, the PyBullet Husky skidded on at 1.3 m/s); with the
-    #: limit at 1x, it could no longer turn near its goal while moving
-    wheel_speed_ratio: float = 1.5
+    #: max_linear_mps, the Husky's 1 m/s top speed). The real recordings reach 0.9 m/s a side and
+    #: turn at 0.5 of the wheel-implied yaw rate up to there; beyond, the calibrated plant turns
+    #: far less (1 m/s and 0.93 rad/s, wheels at 1.5 and 0.5 m/s: 0.16 rad/s, a yaw ratio of
+    #: 0.11, `husky-sim drive-response`), and 1.5x (the uncalibrated plant's setting) made the
+    #: robot plan turns it could not make and touch obstacles on the circle scenarios
+    wheel_speed_ratio: float = 1.0
     #: margin (m) between each body disc and an obstacle: sensing noise and the drive's
     #: tracking error; braking distance is in the model, so this need not cover it.
     margin_m: float = 0.1

@@ -1,9 +1,10 @@
 """husky-cbf: the paper's Relax-CBF NMPC-CLF extended with what a Husky's physics needs.
 
 Per control step:
-1. the initial state of the extended model: the measured pose, the commands the drive is applying
-   (the last command, which every plan keeps within the drive's acceleration limits) and the body
-   yaw rate (the model's prediction corrected by the measured heading change);
+1. the initial state of the extended model, at the instant the drive will act on this step's
+   command (delay.py: after the drive's dead time): the pose and body yaw rate predicted over the
+   dead time from the measured pose and the estimated yaw rate (the model's prediction corrected
+   by the measured heading change) under the commands already sent, and the last command;
 2. the reference: the paper's, unless guidance (guidance.py) gives a waypoint: out of the way of a
    mover on a collision course, onto a set-point's line near the goal (straight at the point of
    a slow trajectory), or along a shortest path when the straight way is blocked;
@@ -25,6 +26,7 @@ import numpy as np
 
 from controllers.backends import FatropSolver, IpoptSolver, RawSolution
 from controllers.husky_cbf.config import HuskyCBFConfig
+from controllers.husky_cbf.delay import CommandPipe
 from controllers.husky_cbf.footprint import disc_cover
 from controllers.husky_cbf.guidance import (
     Guidance,
@@ -68,6 +70,7 @@ class HuskyCBFController:
         self._approach = LineApproach(config.guidance)
         self._evasion = MoverEvasion(config.guidance, self._disc_radius + config.margin_m)
         self._step = extended_step(base.tau_s, config.response)
+        self._pipe = CommandPipe(config.response, base.tau_s)
         self._pose_filter = PoseFilter(config.pose_noise, base.tau_s)
         self._turns = TurnMonitor(round(config.weak_turn_window_s / base.tau_s), config.weak_turn_min_rad)
         self.reset()
@@ -82,9 +85,10 @@ class HuskyCBFController:
 
     def reset(self) -> None:
         self._plan: ExtendedPlan | None = None
-        self._applied = np.zeros(2)  # commands the drive is applying (v m/s, omega rad/s)
-        self._omega_body = 0.0  # predicted body yaw rate now (rad/s)
-        self._omega_prev = 0.0  # estimated body yaw rate at the previous step (rad/s)
+        self._pipe.reset()
+        self._omega_body = 0.0  # body yaw rate predicted for now (rad/s)
+        self._predicted_turn = 0.0  # heading change predicted over the last control step (rad)
+        self._predicted_speed = 0.0  # mean body speed predicted over the last control step (m/s)
         self._yaw_prev: float | None = None
         self._guidance.reset()
         self._approach.reset()
@@ -95,20 +99,18 @@ class HuskyCBFController:
         self._soft.reset()
 
     # -- per-step preparation -------------------------------------------------------------
-    @property
-    def _predicted_yaw_rate(self) -> float:
-        """The body yaw rate (rad/s) the model predicted over the last control step."""
-        return 0.5 * (self._omega_prev + self._omega_body)
-
     def _measured_turn(self, pose: np.ndarray) -> float | None:
         """The heading change (rad) measured over the last control step; None without one."""
         return None if self._yaw_prev is None else float(wrap_angle(pose[2] - self._yaw_prev))
 
-    def _initial_state(self, pose: np.ndarray, measured_turn: float | None) -> np.ndarray:
+    def _initial_state(self, pose: np.ndarray, measured_turn: float | None) -> tuple[np.ndarray, float]:
+        """The extended state where this step's command takes effect (after the dead time), and
+        the body yaw rate estimated now (rad/s)."""
         omega = self._omega_body
         if measured_turn is not None:
-            omega += YAW_RATE_CORRECTION * (measured_turn / self.tau_s - self._predicted_yaw_rate)
-        return np.array([*pose, *self._applied, omega])
+            omega += YAW_RATE_CORRECTION * (measured_turn - self._predicted_turn) / self.tau_s
+        ahead, omega_ahead = self._pipe.predict_dead_time(pose, omega)
+        return np.array([*ahead, *self._pipe.current, omega_ahead]), omega
 
     def _reference(
         self,
@@ -160,7 +162,11 @@ class HuskyCBFController:
                 return state
         return states[0]
 
-    def _obstacles(self, pose: np.ndarray, obstacles: Sequence[Obstacle]) -> tuple[np.ndarray, np.ndarray]:
+    def _obstacles(
+        self, pose: np.ndarray, obstacles: Sequence[Obstacle], delay_s: float
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Centres (slots, N+1, 2) and inflated radii (slots, N+1) (m) at the plan's steps, which
+        start delay_s (s) from now."""
         cfg, base = self.config, self.config.nmpc
         centres, radii = predict_obstacles(
             obstacles, pose[:2], cfg.slots, base.tau_s, base.horizon, base.obstacle_prediction
@@ -171,8 +177,8 @@ class HuskyCBFController:
         velocity = (centres[:, 1, :] - centres[:, 0, :]) / base.tau_s
         speed = np.hypot(velocity[:, 0], velocity[:, 1])
         half_sweep = 0.5 * cfg.mover_sweep_s
-        centres = centres + half_sweep * velocity[:, None, :]
-        travel = speed[:, None] * base.tau_s * np.arange(base.horizon + 1)
+        centres = centres + (delay_s + half_sweep) * velocity[:, None, :]
+        travel = speed[:, None] * (delay_s + base.tau_s * np.arange(base.horizon + 1))
         inflated = (
             radii[:, None] + cfg.margin_m + half_sweep * speed[:, None] + cfg.mover_margin_per_m * travel
         )
@@ -270,18 +276,19 @@ class HuskyCBFController:
             return self._brake(
                 np.full(3, np.nan), n_real, len(obstacles) - n_real, start, "invalid state", False
             )
-        yaw_rate, turn = self._predicted_yaw_rate, self._measured_turn(pose)
-        estimate = self._pose_filter.update(pose, self._applied[0], yaw_rate)
+        turn = self._measured_turn(pose)
+        estimate = self._pose_filter.update(pose, self._predicted_speed, self._predicted_turn / base.tau_s)
         if turn is not None:
-            self._turns.update(yaw_rate * base.tau_s, turn)
-        z0 = self._initial_state(pose, turn)
-        sampled = reference.sample(t, base.tau_s, base.horizon)
+            self._turns.update(self._predicted_turn, turn)
+        z0, omega_now = self._initial_state(pose, turn)
+        t_plan = t + self._pipe.delay_s  # the plan starts when the drive acts on its first command
+        sampled = reference.sample(t_plan, base.tau_s, base.horizon)
         now = sampled[0][0].copy()  # the reference at t, before guidance replaces it
         stationary = self._nearly_stationary(reference, float(sampled[1][0, 0]))
         ref_states, ref_controls, guided = self._reference(
             pose, estimate, float(z0[3]), reference, sampled, stationary, obstacles, t
         )
-        centres, radii = self._obstacles(pose, obstacles)
+        centres, radii = self._obstacles(pose, obstacles, self._pipe.delay_s)
         lookahead = cfg.terminal_lookahead_m * (-1.0 if self._approach.reversing else 1.0)
         caps = self._speed_caps(z0, now, stationary, isinstance(reference, SetPoint), self._evasion.active)
         p = pack_parameters(z0, ref_states, ref_controls, centres, radii, caps, lookahead)
@@ -319,7 +326,7 @@ class HuskyCBFController:
         plan = ExtendedPlan.from_vector(raw.decision, layout)
         self._plan = plan
         command = plan.states[1, 3:5].copy()
-        self._advance(pose, plan.states[0, 5], plan.states[1, 5], command)
+        self._advance(pose, omega_now, command)
         barriers = self._barriers(plan, p, layout, n_real)
         residual = barriers[:, 1:] - plan.decay_slack * (1.0 - base.gamma) * barriers[:, :-1]
         return ControlResult(
@@ -351,10 +358,12 @@ class HuskyCBFController:
         per_slot = rows.reshape(self.config.slots, len(self._discs), -1).min(axis=1)
         return per_slot[:n_real]
 
-    def _advance(self, pose: np.ndarray, omega_now: float, omega_next: float, command: np.ndarray) -> None:
-        """Remember what the drive applies and the predicted body yaw rate at the next step."""
-        self._applied = command
-        self._omega_prev, self._omega_body = omega_now, omega_next
+    def _advance(self, pose: np.ndarray, omega_now: float, command: np.ndarray) -> None:
+        """Send `command` down the pipe and predict the control step it starts: the body yaw rate
+        at its end, its heading change and its mean speed (what the next step checks)."""
+        self._pipe.send(command)
+        end_pose, self._omega_body, self._predicted_speed = self._pipe.predict_step(pose, omega_now)
+        self._predicted_turn = float(wrap_angle(end_pose[2] - pose[2]))
         self._yaw_prev = float(pose[2])
 
     def _brake(
@@ -362,10 +371,10 @@ class HuskyCBFController:
     ) -> ControlResult:
         n = self.config.nmpc.horizon
         if np.all(np.isfinite(pose)):
-            z0 = self._initial_state(pose, self._measured_turn(pose))
-            braking = self._rollout(z0, self._accels_for(z0, np.zeros((n, 2))))
-            self._advance(pose, z0[5], braking.states[1, 5], braking.states[1, 3:5].copy())
+            _, omega_now = self._initial_state(pose, self._measured_turn(pose))
+            self._advance(pose, omega_now, np.zeros(2))
         else:
+            self._pipe.send(np.zeros(2))
             self._yaw_prev = None
         result = ControlResult.brake(n, n_real, ignored, time.perf_counter() - start, status, guided)
         result.solver_fallback = "; ".join(dict.fromkeys(self._solver_fallbacks))

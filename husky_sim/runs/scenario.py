@@ -42,7 +42,7 @@ from husky_sim.scenario_file import ScenarioFileError, read_scenario_data
 from husky_sim.sim.drive import DriveConfig
 from husky_sim.sim.episode import EpisodeConfig
 from husky_sim.sim.geometry import load_geometry
-from husky_sim.sim.ground import DEFAULT_GROUND, load_ground, with_friction
+from husky_sim.sim.ground import DEFAULT_GROUND, DRIVE_TIME_BOUNDS_S, load_ground, with_friction
 from husky_sim.sim.kinematic import KinematicProblem
 from husky_sim.sim.outcomes import Outcomes
 from husky_sim.sim.sensing import SensingConfig
@@ -244,14 +244,15 @@ class RandomObstacles(_Strict):
 
 
 class YawResponseSpec(_Strict):
-    """First-order yaw-rate lag of the robot (husky_sim.sim.yaw_response.YawResponse): gain
-    (dimensionless) and time constant (s)."""
+    """First-order yaw-rate lag of the robot behind its drive's dead time
+    (husky_sim.sim.yaw_response.YawResponse): gain (dimensionless), time constant (s), dead time (s)."""
 
     gain: _real(*GAIN_BOUNDS)
     time_constant_s: _real(*TIME_CONSTANT_BOUNDS_S, "s")
+    delay_s: _real(*DRIVE_TIME_BOUNDS_S, "s") = 0.0
 
     def params(self) -> YawResponse:
-        return YawResponse(self.gain, self.time_constant_s)
+        return YawResponse(self.gain, self.time_constant_s, self.delay_s)
 
 
 @functools.cache
@@ -263,7 +264,7 @@ def identified_yaw_response() -> YawResponse:
         data = read_scenario_data(YAW_RESPONSE_FILE)
     except ScenarioFileError as exc:
         raise ScenarioError(f"{exc} (`husky-sim identify` writes it)") from None
-    wanted = {key: data.get(key) for key in YawResponseSpec.model_fields}
+    wanted = {key: data[key] for key in YawResponseSpec.model_fields if key in data}
     try:
         return YawResponseSpec.model_validate_json(json.dumps(wanted, default=str), strict=True).params()
     except ValidationError as exc:
@@ -535,6 +536,7 @@ class Scenario(_Strict):
                 drive.max_angular_accel_radps2,
                 yaw.gain,
                 yaw.time_constant_s,
+                command_delay_s=yaw.delay_s,
                 half_separation_m=0.5 * geometry.track_width_m * drive.wheel_separation_multiplier,
                 max_linear_mps=drive.max_linear_mps,
             ),

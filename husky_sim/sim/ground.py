@@ -34,6 +34,10 @@ class GroundError(ValueError):
     """A ground that cannot be loaded; the message is one line."""
 
 
+#: Range of a drive's dead time and lag (s); a robot's declared dead time (scenario) too.
+DRIVE_TIME_BOUNDS_S = (0.0, 2.0)
+
+
 @dataclass(frozen=True)
 class DriveResponse:
     """The wheel speed loop's dead time and first-order lag (s), fitted on the same recording."""
@@ -42,10 +46,11 @@ class DriveResponse:
     wheel_time_constant_s: float = 0.0
 
     def __post_init__(self) -> None:
+        lo, hi = DRIVE_TIME_BOUNDS_S
         for name in ("command_delay_s", "wheel_time_constant_s"):
             value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, int | float) or not (0.0 <= value <= 2.0):
-                raise ValueError(f"ground.drive.{name}: must be in [0, 2] s, got {value}")
+            if isinstance(value, bool) or not isinstance(value, int | float) or not (lo <= value <= hi):
+                raise ValueError(f"ground.drive.{name}: must be in [{lo:g}, {hi:g}] s, got {value}")
 
 
 @dataclass(frozen=True)

@@ -1,9 +1,11 @@
 """The Husky's yaw-rate response as a first-order lag, and its identification.
 
-Model (continuous time):  d(omega_body)/dt = (K * omega_applied - omega_body) / T,  with
+Model (continuous time):  d(omega_body)/dt = (K * omega_applied(t - D) - omega_body) / T,  with
 omega_applied the drive's rate-limited yaw-rate command (husky_sim.sim.drive.SkidSteerDrive.limit,
-rad/s), omega_body the measured body yaw rate (rad/s), K the steady-state gain (dimensionless) and
-T the time constant (s). Discretised exactly with omega_applied held between samples (zero-order
+rad/s), omega_body the measured body yaw rate (rad/s), K the steady-state gain (dimensionless), T
+the time constant (s) and D the drive's dead time (s; the ground's `drive.command_delay_s`, measured
+from the real robot's recordings, not fitted here: a lag alone lumps that dead time into T, as
+0.50 s did). Discretised exactly with the delayed omega_applied held between samples (zero-order
 hold). `identify_in_simulation` drives the simulated Husky through yaw-rate steps and fits one
 (K, T) to all of them; `fit_yaw_response` fits a recorded signal (husky-sim replay).
 """
@@ -38,11 +40,13 @@ MIN_EXCITATION_RADPS = 0.05
 
 @dataclass(frozen=True)
 class YawResponse:
-    """First-order yaw-rate lag d(omega_body)/dt = (gain * omega_applied - omega_body) / time_constant_s:
-    gain dimensionless, time_constant_s in s, yaw rates in rad/s."""
+    """First-order yaw-rate lag behind a dead time, d(omega_body)/dt = (gain * omega_applied(t -
+    delay_s) - omega_body) / time_constant_s: gain dimensionless, time_constant_s and delay_s in s,
+    yaw rates in rad/s. The dead time delays the drive's linear speed alike."""
 
     gain: float
     time_constant_s: float
+    delay_s: float = 0.0
 
 
 #: One recorded or simulated signal: sample times (s), applied yaw rate held from each sample to
@@ -98,9 +102,10 @@ def rms(values: np.ndarray) -> float:
     return float(np.sqrt(np.mean(np.square(values))))
 
 
-def fit_segments(segments: Sequence[Segment]) -> tuple[YawResponse, float]:
+def fit_segments(segments: Sequence[Segment], delay_s: float = 0.0) -> tuple[YawResponse, float]:
     """One (gain, time constant) for all segments by bounded least squares on the simulated output
-    (each segment simulated from its own first measured yaw rate); with the overall rms error (rad/s)."""
+    (each segment simulated from its own first measured yaw rate); with the overall rms error (rad/s).
+    The segments' applied yaw rates are already delayed by `delay_s` (s), which the result carries."""
     from scipy.optimize import least_squares  # heavy; only a fit needs it
 
     checked = [_checked(s) for s in segments]
@@ -112,7 +117,7 @@ def fit_segments(segments: Sequence[Segment]) -> tuple[YawResponse, float]:
         )
 
     def residuals(x: np.ndarray) -> np.ndarray:
-        response = YawResponse(float(x[0]), float(x[1]))
+        response = YawResponse(float(x[0]), float(x[1]), delay_s)
         return np.concatenate([segment_residual(response, s) for s in checked])
 
     lower, upper = (GAIN_BOUNDS[0], TIME_CONSTANT_BOUNDS_S[0]), (GAIN_BOUNDS[1], TIME_CONSTANT_BOUNDS_S[1])
@@ -120,7 +125,7 @@ def fit_segments(segments: Sequence[Segment]) -> tuple[YawResponse, float]:
         least_squares(residuals, x0=x0, bounds=(lower, upper), x_scale=(0.5, 0.5)) for x0 in FIT_STARTS
     ]
     best = min(solutions, key=lambda s: s.cost)  # the first of equals: deterministic
-    return YawResponse(float(best.x[0]), float(best.x[1])), rms(residuals(best.x))
+    return YawResponse(float(best.x[0]), float(best.x[1]), delay_s), rms(residuals(best.x))
 
 
 def fit_yaw_response(
@@ -175,7 +180,8 @@ class Identification:
         """A human-readable report."""
         r = self.response
         out = [
-            f"yaw-rate lag: gain {r.gain:.3f}, time constant {r.time_constant_s:.3f} s, rms error "
+            f"yaw-rate lag: gain {r.gain:.3f}, time constant {r.time_constant_s:.3f} s behind the "
+            f"ground's dead time {r.delay_s:.3f} s, rms error "
             f"{self.rms_error_radps:.4f} rad/s over {len(self.steps)} steps of {self.hold_s:g} s "
             f"(sampled every {self.sample_s:g} s)",
             "   v (m/s)  omega (rad/s)  rms (rad/s)  own gain  own T (s)  late ratio",
@@ -192,6 +198,7 @@ class Identification:
         return {
             "gain": round(self.response.gain, 4),
             "time_constant_s": round(self.response.time_constant_s, 4),
+            "delay_s": round(self.response.delay_s, 4),
             "rms_error_radps": round(self.rms_error_radps, 5),
             "hold_s": self.hold_s,
             "sample_s": self.sample_s,
@@ -206,9 +213,11 @@ def step_signal(
     sample_s: float,
     world: WorldConfig | None = None,
     drive: DriveConfig | None = None,
+    delay_s: float = 0.0,
 ) -> Segment:
     """Simulate the Husky from rest with (linear_mps, yaw_rate_radps) commanded from t = 0 for
-    hold_s (s); the applied yaw rate (interval means) and body yaw rate every sample_s (s)."""
+    hold_s (s) on the default ground; the applied yaw rate delayed by delay_s (s, interval means)
+    and the body yaw rate every sample_s (s)."""
     from husky_sim.sim.open_loop import simulate_commands  # commands in, track out
 
     track = simulate_commands(
@@ -222,8 +231,9 @@ def step_signal(
     every = max(round(sample_s / float(track.t_s[1] - track.t_s[0])), 1)
     idx = np.arange(0, len(track.t_s), every)
     t = track.t_s[idx]
-    applied = interval_means(track.t_s[:-1], track.applied[:, 1], t)
-    return t, applied, track.body_velocity[idx, 1]
+    fine_t = track.t_s[:-1]
+    delayed = np.interp(fine_t - delay_s, fine_t, track.applied[:, 1], left=0.0)  # at rest before
+    return t, interval_means(fine_t, delayed, t), track.body_velocity[idx, 1]
 
 
 def identify_in_simulation(
@@ -235,16 +245,19 @@ def identify_in_simulation(
     drive: DriveConfig | None = None,
 ) -> Identification:
     """Yaw-rate steps (rad/s) at each linear speed (m/s), each from rest and held hold_s (s), on
-    flat ground with the default (or given) WorldConfig and DriveConfig; one lag fitted to all.
-    Deterministic (PyBullet DIRECT, no noise)."""
+    the default ground with the default (or given) WorldConfig and DriveConfig; one lag fitted to
+    all, behind the ground's dead time. Deterministic (PyBullet DIRECT, no noise)."""
+    from husky_sim.sim.ground import load_ground
+
     if not (0 < sample_s <= hold_s) or not math.isfinite(hold_s):
         raise ValueError(f"identify: need 0 < sample_s <= hold_s, got {sample_s:g} and {hold_s:g}")
+    delay_s = load_ground().drive.command_delay_s
     commands = [(v, w) for v in linear_speeds_mps for w in yaw_rates_radps]
-    segments = [step_signal(v, w, hold_s, sample_s, world, drive) for v, w in commands]
-    response, total = fit_segments(segments)
+    segments = [step_signal(v, w, hold_s, sample_s, world, drive, delay_s) for v, w in commands]
+    response, total = fit_segments(segments, delay_s)
     steps = []
     for (v, w), segment in zip(commands, segments, strict=True):
-        own, _ = fit_segments([segment])
+        own, _ = fit_segments([segment], delay_s)
         steps.append(
             StepFit(
                 linear_mps=v,
@@ -269,8 +282,9 @@ def write_identification(identification: Identification, path: Path, command: st
     header = (
         f"Produced by `{command}` on {when}.\n"
         "Husky A200 yaw-rate lag in PyBullet (husky_sim/sim/yaw_response.py): d(omega_body)/dt =\n"
-        "(gain * omega_applied - omega_body) / time_constant_s; gain dimensionless, time_constant_s in s,\n"
-        "omega_applied the drive's rate-limited yaw-rate command, omega_body the body yaw rate (rad/s).\n"
+        "(gain * omega_applied(t - delay_s) - omega_body) / time_constant_s; gain dimensionless,\n"
+        "time_constant_s in s, delay_s the default ground's dead time (s, not fitted), omega_applied\n"
+        "the drive's rate-limited yaw-rate command, omega_body the body yaw rate (rad/s).\n"
         "Fitted to yaw-rate steps from rest at each linear speed; steps: the joint fit's rms error on\n"
         "each step, a lag fitted to that step alone, and the mean measured / commanded yaw rate over\n"
         "the step's second half. The default of every scenario without robot.yaw_response."

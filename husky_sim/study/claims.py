@@ -310,8 +310,8 @@ def claim_ours_prediction_time(runs: Runs, model: str) -> Verdict:
     if model not in OURS_MODELS:
         return Verdict(
             NOT_APPLICABLE,
-            f"{OURS} models the Husky's drive (acceleration limits, yaw-rate lag); the kinematic loop "
-            f"runs only the paper's unicycle controllers",
+            f"{OURS} models the Husky's drive (acceleration limits, dead time, yaw-rate lag); the "
+            f"kinematic loop runs only the paper's unicycle controllers",
         )
     checks, parts = [], []
     for p in PREDICTION_TIME_PROBLEMS:
