@@ -10,9 +10,10 @@ Each finding is pass / warn / fail with the numbers behind it:
 - acceleration: the paper's NMPC has no acceleration constraint, so one control step may ask for
   any change within the bounds; the drive's rate limit then makes the robot lag its plan.
   husky-cbf plans its accelerations within its own bounds, checked against the drive's.
-- stopping distance at v_max (reaction over tau and the latency, plus braking at the drive's
-  deceleration) against the radius margin the plan keeps (husky-cbf plans its braking: only the
-  latency is beyond its plan, against its disc margin).
+- stopping distance at v_max (reaction over tau, the sensing latency, the ground's drive dead time
+  and braking at the drive's deceleration) against the radius margin the plan keeps (husky-cbf
+  plans its braking and the dead time it is told of: only the latency and any dead time beyond
+  that are beyond its plan, against its disc margin).
 - timing: tau against the p99 of solve times measured here on the scenario's kinematic closed
   loop; a plan that cannot be solved within tau is a FAIL.
 - obstacles and sensing: radii, motion and prediction model, noise and latency, stated.
@@ -31,6 +32,7 @@ from husky_sim.runs.scenario import Scenario
 from husky_sim.sim import specs as specs
 from husky_sim.sim.drive import DriveConfig
 from husky_sim.sim.geometry import load_geometry
+from husky_sim.sim.ground import load_ground
 from husky_sim.sim.kinematic import run_kinematic
 from husky_sim.sim.metrics import solver_times
 
@@ -262,28 +264,36 @@ def check_planned_acceleration(scenario: Scenario) -> Finding:
 
 
 def check_planned_stopping(scenario: Scenario) -> Finding:
-    """husky-cbf: braking is in its plan (v^2 / 2a kept free at the horizon's end), so only the
-    latency, which it does not know of, can carry the robot past a planned stop."""
+    """husky-cbf: braking is in its plan (v^2 / 2a kept free at the horizon's end), and so is the
+    drive's dead time it is told of; the latency, which it does not know of, and any dead time
+    beyond its own can carry the robot past a planned stop."""
     cfg = scenario.husky_cbf_config()
     reaction, latency, braking = stopping_distance_m(scenario)
+    dead_time = dead_time_m(scenario)
+    planned_dead_time = scenario.controller.v_max_mps * cfg.response.command_delay_s
+    unplanned = latency + max(dead_time - planned_dead_time, 0.0)
     values = {
         "reaction_m": reaction,
         "latency_m": latency,
+        "dead_time_m": dead_time,
+        "planned_dead_time_m": planned_dead_time,
         "braking_m": braking,
-        "stopping_m": reaction + latency + braking,
-        "unplanned_overrun_m": latency,
+        "stopping_m": reaction + latency + dead_time + braking,
+        "unplanned_overrun_m": unplanned,
         "margin_m": cfg.margin_m,
     }
     text = (
         f"stop from v_max {scenario.controller.v_max_mps:g} m/s: {values['stopping_m']:.3f} m "
-        f"({reaction:.3f} m over tau + {latency:.3f} m latency + {braking:.3f} m braking, which "
-        f"husky-cbf plans); beyond the plan {latency:.3f} m vs disc margin {cfg.margin_m:.3f} m"
+        f"({reaction:.3f} m over tau + {latency:.3f} m latency + {dead_time:.3f} m drive dead time + "
+        f"{braking:.3f} m braking; husky-cbf plans the braking and {planned_dead_time:.3f} m of dead "
+        f"time); beyond the plan {unplanned:.3f} m vs disc margin {cfg.margin_m:.3f} m"
     )
-    if latency > cfg.margin_m:
+    if unplanned > cfg.margin_m:
         return Finding(
             "stopping distance",
             "warn",
-            f"{text}: the sensing latency carries the robot past a planned stop by more than its margin",
+            f"{text}: the sensing latency and the drive's dead time carry the robot past a planned "
+            "stop by more than its margin",
             values,
         )
     return Finding("stopping distance", "pass", text, values)
@@ -299,28 +309,36 @@ def stopping_distance_m(scenario: Scenario) -> tuple[float, float, float]:
     return reaction, latency, v**2 / (2.0 * drive.max_linear_accel_mps2)
 
 
+def dead_time_m(scenario: Scenario) -> float:
+    """Distance (m) the robot covers at v_max during its ground's drive dead time (a calibrated
+    ground's is the real drive's: 0.34 s on wet grass), before it acts on a command to stop."""
+    return scenario.controller.v_max_mps * load_ground(scenario.ground).drive.command_delay_s
+
+
 def check_stopping_distance(scenario: Scenario) -> Finding:
     reaction, latency, braking = stopping_distance_m(scenario)
-    overrun, margin = latency + braking, radius_margin_m(scenario)
+    dead_time = dead_time_m(scenario)
+    overrun, margin = latency + dead_time + braking, radius_margin_m(scenario)
     values = {
         "reaction_m": reaction,
         "latency_m": latency,
+        "dead_time_m": dead_time,
         "braking_m": braking,
-        "stopping_m": reaction + latency + braking,
+        "stopping_m": reaction + latency + dead_time + braking,
         "unplanned_overrun_m": overrun,
         "radius_margin_m": margin,
     }
     text = (
         f"stop from v_max {scenario.controller.v_max_mps:g} m/s: {values['stopping_m']:.3f} m "
-        f"({reaction:.3f} m over tau + {latency:.3f} m latency + {braking:.3f} m braking); "
-        f"beyond the plan {overrun:.3f} m vs radius margin {margin:+.3f} m"
+        f"({reaction:.3f} m over tau + {latency:.3f} m latency + {dead_time:.3f} m drive dead time + "
+        f"{braking:.3f} m braking); beyond the plan {overrun:.3f} m vs radius margin {margin:+.3f} m"
     )
     if overrun > margin:
         return Finding(
             "stopping distance",
             "warn",
             f"{text}: the plan assumes an instant stop; at full speed the robot overruns a planned "
-            "stop by more than its margin",
+            "stop (latency, the drive's dead time, braking) by more than its margin",
             values,
         )
     return Finding("stopping distance", "pass", text, values)

@@ -130,6 +130,25 @@ def test_audit_judges_husky_cbf_by_its_own_body_and_model() -> None:
     assert stopping.status == "warn" and stopping.values["unplanned_overrun_m"] == pytest.approx(0.2)
     noisy = _modified(sc, sensing={"pose_xy_std_m": 0.05, "obstacle_xy_std_m": 0.05})
     assert {f.check: f for f in audit(noisy, fast, controller="husky-cbf")}["robot radius"].status == "warn"
+    # told no dead time on a ground whose drive has 0.343 s: 0.343 m beyond its plan at 1 m/s
+    untold = _modified(sc, robot={"yaw_response": {"gain": 0.85, "time_constant_s": 0.11}})
+    stopping = {f.check: f for f in audit(untold, fast, controller="husky-cbf")}["stopping distance"]
+    assert stopping.status == "warn" and stopping.values["unplanned_overrun_m"] == pytest.approx(0.343)
+
+
+def test_the_stopping_distance_counts_the_grounds_drive_dead_time() -> None:
+    """The calibrated default ground's drive acts 0.343 s after a command (the real Husky's): at
+    1 m/s the paper's controllers, which plan an instant stop, overrun it by that much more than
+    braking (1 / (2 x 3) m) and latency; on the uncalibrated ground, which answers at once, not."""
+    fast = [0.004] * 10
+    sc = load_scenario("paper_point_stabilisation")
+    stopping = {f.check: f for f in audit(sc, fast)}["stopping distance"]
+    assert stopping.values["dead_time_m"] == pytest.approx(0.343)
+    assert stopping.values["unplanned_overrun_m"] == pytest.approx(0.343 + 1.0 / 6.0)
+    assert stopping.status == "warn" and "dead time" in stopping.detail
+    instant = _modified(sc, ground="pybullet_coulomb")
+    stopping = {f.check: f for f in audit(instant, fast)}["stopping distance"]
+    assert stopping.values["dead_time_m"] == 0.0 and stopping.status == "pass"
 
 
 def test_timing_fails_when_tau_is_shorter_than_the_measured_solves() -> None:
