@@ -8,6 +8,7 @@ from husky_sim import interrupts
 from husky_sim.cli.common import (
     CONTROLLER_CHOICES,
     add_backend_args,
+    add_solver_arg,
     count_arg,
     horizon_arg,
     jobs_arg,
@@ -41,7 +42,7 @@ def cmd_check(args: argparse.Namespace) -> int:
         if args.payload_kg is None
         else PerturbationRanges(payload_kg=tuple(args.payload_kg)),
     )
-    sc = load_scenario(args.scenario)
+    sc = load_scenario(args.scenario).with_overrides(solver=args.solver)
     horizon = sc.with_overrides(horizon=args.horizon).controller.horizon  # range-checked here
     seed = sc.seed if args.seed is None else args.seed
     interrupts.begin_run()  # workers are stopped, not orphaned, on a signal
@@ -67,6 +68,7 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     check.add_argument("--samples", type=count_arg, default=32, help="perturbed runs K >= 1 (default 32)")
     check.add_argument("--jobs", type=jobs_arg, default=None, help="worker processes (default: all cores)")
     check.add_argument("--seed", type=seed_arg, default=None, help="perturbation seed >= 0")
+    add_solver_arg(check)
     add_backend_args(check, "samples")
     check.add_argument("--timing-solves", type=count_arg, default=100, help="NMPC solves timed (default 100)")
     check.add_argument(

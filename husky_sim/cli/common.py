@@ -14,6 +14,9 @@ from husky_sim.sim.specs import HUSKY_SPEC_SHEET
 CONTROLLER_CHOICES = ("none", "bt", "cbf", "relax-cbf", "husky-cbf")
 #: The NLP solver backends (controllers.config.SOLVER_BACKENDS, likewise kept equal by a test).
 SOLVER_CHOICES = ("fatrop", "ipopt", "opti")
+#: Those a run can use for every controller (a scenario's controller.solver, likewise kept equal by
+#: a test): `opti` is the paper controllers' own baseline, which only `bench` builds.
+RUN_SOLVER_CHOICES = ("fatrop", "ipopt")
 #: The longest horizon N a command takes (husky_sim.runs.scenario.MAX_HORIZON, likewise).
 MAX_HORIZON = 50
 
@@ -73,6 +76,17 @@ payload_arg = number_in(float, 0.0, HUSKY_SPEC_SHEET.max_payload_kg)
 #: Where a suite's runs or a check's samples run (husky_sim.runs.parallel.BACKENDS, kept equal by
 #: a test).
 PARALLEL_BACKENDS = ("local", "dask")
+
+
+def add_solver_arg(parser: argparse.ArgumentParser) -> None:
+    """--solver: the NLP backend of every NMPC the command runs (default: the scenario file's,
+    else the structured FATROP with its IPOPT fallback)."""
+    parser.add_argument(
+        "--solver",
+        choices=RUN_SOLVER_CHOICES,
+        default=None,
+        help="NLP backend (default: the scenario's, else fatrop)",
+    )
 
 
 def add_backend_args(parser: argparse.ArgumentParser, what: str) -> None:

@@ -9,6 +9,7 @@ from husky_sim.cli.common import (
     CONTROLLER_CHOICES,
     HORIZON_HELP,
     add_live_argument,
+    add_solver_arg,
     announce_live,
     horizon_arg,
     path_arg,
@@ -28,7 +29,7 @@ def cmd_run(args: argparse.Namespace) -> int:
     from husky_sim.viz.rendering import record_in_summary, render_run
 
     interrupts.check()  # the imports above take a second; a signal swallowed in them ends here
-    sc = load_scenario(args.scenario).with_overrides(args.horizon, args.gamma, args.seed)
+    sc = load_scenario(args.scenario).with_overrides(args.horizon, args.gamma, args.seed, args.solver)
     interrupts.check()  # loading builds the robot geometry (yourdfpy, trimesh)
     video = options_from_args(args) if args.video else None  # bad render options fail before the run
     horizon, gamma = sc.controller.horizon, sc.controller.gamma
@@ -60,6 +61,7 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     run.add_argument("--horizon", type=horizon_arg, default=None, help=HORIZON_HELP)
     run.add_argument("--gamma", type=unit_float_arg, default=None, help="CBF decay rate in [0, 1]")
     run.add_argument("--seed", type=seed_arg, default=None, help="noise and random-field seed")
+    add_solver_arg(run)
     run.add_argument("--out", type=path_arg, default=None, help="output directory (default results/<run>)")
     run.add_argument("--video", action="store_true", help="then render OUT/video_CAMERA.mp4 from its trace")
     add_live_argument(run)

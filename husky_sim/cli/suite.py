@@ -10,6 +10,7 @@ from husky_sim.cli.common import (
     CONTROLLER_CHOICES,
     UsageError,
     add_backend_args,
+    add_solver_arg,
     horizon_arg,
     jobs_arg,
     path_arg,
@@ -33,8 +34,10 @@ def cmd_suite(args: argparse.Namespace) -> int:
         sc = load_scenario(name)
         for horizon in args.horizons or [None]:
             for gamma in args.gammas or [None]:
-                sc.with_overrides(horizon, gamma, args.seed)
-    cells = matrix(names, args.controllers, args.horizons or [None], args.gammas or [None], args.seed)
+                sc.with_overrides(horizon, gamma, args.seed, args.solver)
+    cells = matrix(
+        names, args.controllers, args.horizons or [None], args.gammas or [None], args.seed, args.solver
+    )
     interrupts.begin_run()
     out = prepare_out_dir(Path(args.out))
     try:
@@ -77,6 +80,7 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     suite.add_argument("--gammas", nargs="+", type=unit_float_arg, default=None, help="default: file's gamma")
     suite.add_argument("--seed", type=seed_arg, default=None, help="seed (default: the file's)")
     suite.add_argument("--jobs", type=jobs_arg, default=2, help="worker processes (default 2)")
+    add_solver_arg(suite)
     add_backend_args(suite, "runs")
     suite.add_argument(
         "--out", type=path_arg, default=str(SUITE_DIR), help=f"output directory (default {SUITE_DIR})"

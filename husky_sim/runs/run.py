@@ -18,12 +18,18 @@ from husky_sim.sim.geometry import load_geometry
 
 
 def resolved(
-    scenario: Scenario | str, horizon: int | None = None, gamma: float | None = None, seed: int | None = None
+    scenario: Scenario | str,
+    horizon: int | None = None,
+    gamma: float | None = None,
+    seed: int | None = None,
+    solver: str | None = None,
 ) -> Scenario:
     """The scenario (a shipped name, a path or a Scenario) with the overrides applied and validated
-    by the schema: the one place a run's N, gamma and seed are decided (Scenario.with_overrides)."""
+    by the schema: the one place a run's N, gamma, seed and solver backend are decided
+    (Scenario.with_overrides)."""
     sc = load_scenario(scenario) if isinstance(scenario, str) else scenario
-    return sc.with_overrides(horizon, gamma, seed) if (horizon, gamma, seed) != (None, None, None) else sc
+    overrides = (horizon, gamma, seed, solver)
+    return sc.with_overrides(*overrides) if overrides != (None, None, None, None) else sc
 
 
 def run_settings(sc: Scenario, controller: str, model: Model = "physics") -> tuple[RunSettings, float]:
@@ -47,6 +53,7 @@ def run_settings(sc: Scenario, controller: str, model: Model = "physics") -> tup
         v_min_mps=nmpc_config.v_min_mps,
         v_max_mps=nmpc_config.v_max_mps,
         omega_max_radps=omega_max,
+        solver=nmpc_config.solver.backend,
     )
     return settings, nmpc_config.robot_radius_m
 
@@ -60,6 +67,7 @@ def run_scenario(
     out_dir: Path | None = None,
     implementation: Controller | None = None,
     live_port: int | None = None,
+    solver: str | None = None,
 ) -> RunSummary:
     """Run a scenario; return the summary (also written to out_dir/summary.json, with the log,
     the trace and run.mcap for Foxglove; `live_port` also streams it to Foxglove while it runs).
@@ -67,7 +75,7 @@ def run_scenario(
     `implementation` runs in the controller's place (a rehearsal's DDS robot, whose decisions come
     from the named controller in another process); by default the named controller is built here.
     """
-    sc = resolved(scenario, horizon, gamma, seed)
+    sc = resolved(scenario, horizon, gamma, seed, solver)
     settings, robot_radius_m = run_settings(sc, controller)
     nmpc = implementation if implementation is not None else sc.make_controller(controller)
     episode_config = sc.episode_config()

@@ -8,7 +8,7 @@ obstacle, a random field that cannot be placed, and work that would not fit a ru
 `MAX_OBSTACLES` obstacles, `MAX_CONTROL_STEPS` control steps or a control period that is not a
 whole number of physics steps), all before anything runs. Validation errors become one line
 naming the field, the allowed range and at most a short excerpt of the value (ScenarioError).
-Command-line overrides (horizon, gamma, seed) are applied by `with_overrides`, which validates
+Command-line overrides (horizon, gamma, seed, solver) are applied by `with_overrides`, which validates
 them with the same schema.
 """
 
@@ -466,11 +466,18 @@ class Scenario(_Strict):
         return specs
 
     def with_overrides(
-        self, horizon: int | None = None, gamma: float | None = None, seed: int | None = None
+        self,
+        horizon: int | None = None,
+        gamma: float | None = None,
+        seed: int | None = None,
+        solver: str | None = None,
     ) -> Scenario:
         """This scenario with command-line overrides applied and validated by the same schema
-        (so `--horizon 500` is the same one-line error as `horizon: 500` in the file)."""
+        (so `--horizon 500` is the same one-line error as `horizon: 500` in the file); `solver`
+        names the NLP backend (controller.solver)."""
         data = self.model_dump()
+        if solver is not None:
+            data["controller"]["solver"] = solver
         if horizon is not None:
             data["controller"]["horizon"] = horizon
         if gamma is not None:

@@ -28,6 +28,7 @@ class RunSettings:
     v_min_mps: float
     v_max_mps: float
     omega_max_radps: float  # the bound the controller commands within
+    solver: str = "fatrop"  # the NLP backend it solved with (controllers.config.SOLVER_BACKENDS)
 
 
 @dataclass(frozen=True)

@@ -51,6 +51,7 @@ class Cell:
     seed: int | None = None
     model: str = "physics"  # "physics" (PyBullet) or "kinematic" (the controller's unicycle)
     robot_radius_m: float | None = None  # kinematic only: override the scenario's robot circle
+    solver: str | None = None  # NLP backend; None: the scenario file's (default SolverOptions')
 
     def label(self) -> str:
         parts = [Path(self.scenario).stem, self.controller]
@@ -62,6 +63,8 @@ class Cell:
             parts.append(f"g{self.gamma:g}")
         if self.seed is not None:
             parts.append(f"s{self.seed}")
+        if self.solver is not None:
+            parts.append(self.solver)
         return "__".join(parts)
 
 
@@ -71,10 +74,12 @@ def matrix(
     horizons: Sequence[int | None] = (None,),
     gammas: Sequence[float | None] = (None,),
     seed: int | None = None,
+    solver: str | None = None,
 ) -> list[Cell]:
-    """Every combination, in a fixed order (scenario, controller, gamma, horizon), each once."""
+    """Every combination, in a fixed order (scenario, controller, gamma, horizon), each once, on
+    the NLP backend `solver` (None: each scenario file's)."""
     cells = [
-        Cell(s, c, n, g, seed)
+        Cell(s, c, n, g, seed, solver=solver)
         for s in scenarios
         for c in controllers
         for g in (gammas if c != "bt" and c != "none" else gammas[:1])  # bt has no gamma
@@ -122,7 +127,13 @@ def run_cell(cell: Cell, out_dir: Path | None) -> dict[str, object]:
             ).as_dict()
         else:
             summary = run_scenario(
-                cell.scenario, cell.controller, cell.horizon, cell.gamma, cell.seed, run_dir
+                cell.scenario,
+                cell.controller,
+                cell.horizon,
+                cell.gamma,
+                cell.seed,
+                run_dir,
+                solver=cell.solver,
             ).as_dict()
     except Exception as exc:  # noqa: BLE001 - reported per cell, the suite goes on
         return _error_row(cell, exc, out_dir)

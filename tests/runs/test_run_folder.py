@@ -30,7 +30,7 @@ def test_a_summary_round_trips_as_strict_json(tmp_path: Path) -> None:
 
 
 def test_a_typed_run_summary_is_written_as_its_flat_record(tmp_path: Path) -> None:
-    settings = RunSettings("s", "cbf", 5, 0.1, 7, "kinematic", 0.1, 0.5, -1.0, 1.0, 0.78)
+    settings = RunSettings("s", "cbf", 5, 0.1, 7, "kinematic", 0.1, 0.5, -1.0, 1.0, 0.78, "ipopt")
     series = {
         k: [0.0, 0.1] for k in ("t_s", "x_m", "y_m", "ref_x_m", "ref_y_m", "v_cmd_mps", "omega_cmd_radps")
     }

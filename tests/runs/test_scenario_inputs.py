@@ -335,10 +335,12 @@ def test_cli_controller_choices_are_the_controllers_packages() -> None:
     from controllers import CONTROLLER_NAMES
     from controllers.config import SOLVER_BACKENDS
     from husky_sim.cli import CONTROLLER_CHOICES, SOLVER_CHOICES
-    from husky_sim.cli.common import MAX_HORIZON, PARALLEL_BACKENDS
+    from husky_sim.cli.common import MAX_HORIZON, PARALLEL_BACKENDS, RUN_SOLVER_CHOICES
     from husky_sim.runs import parallel, scenario
 
     assert CONTROLLER_CHOICES == CONTROLLER_NAMES
     assert SOLVER_CHOICES == SOLVER_BACKENDS
+    literal, _ = get_args(scenario.ControllerSpec.model_fields["solver"].annotation)  # Literal | None
+    assert set(RUN_SOLVER_CHOICES) == set(get_args(literal))
     assert MAX_HORIZON == scenario.MAX_HORIZON
     assert PARALLEL_BACKENDS == parallel.BACKENDS

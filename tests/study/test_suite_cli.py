@@ -91,6 +91,26 @@ def test_suite_runs_in_parallel_and_writes_results_and_figures(tmp_path: Path) -
     assert (out / "plots" / "comparison_husky_point_stabilisation.png").stat().st_size > 10_000
 
 
+def test_solver_chooses_the_nlp_backend_of_run_and_suite(tmp_path: Path) -> None:
+    """`--solver ipopt`: every step of husky-cbf's run and of a suite's cells solved on IPOPT (the
+    default is FATROP), recorded in the log and the summary; the suite labels its runs with it."""
+    scenario = str(_short_scenario(tmp_path, "husky_point_stabilisation", 2.0))
+    run = tmp_path / "run"
+    assert main(["run", scenario, "--controller", "husky-cbf", "--solver", "ipopt", "--out", str(run)]) == 0
+    with (run / "log.csv").open() as f:
+        assert {r["solver"] for r in csv.DictReader(f)} == {"ipopt"}
+    assert '"solver": "ipopt"' in (run / "summary.json").read_text()
+    default = tmp_path / "default"
+    assert main(["run", scenario, "--controller", "husky-cbf", "--out", str(default)]) == 0
+    assert '"solver": "fatrop"' in (default / "summary.json").read_text()
+    out = tmp_path / "suite"
+    args = ["suite", "--scenarios", scenario, "--controllers", "cbf", "--horizons", "5", "--solver", "ipopt"]
+    assert main([*args, "--jobs", "1", "--quiet", "--out", str(out)]) == 0
+    with (out / "results.csv").open() as f:
+        (row,) = list(csv.DictReader(f))
+    assert row["solver"] == "ipopt" and row["run_dir"].endswith("__ipopt")
+
+
 def test_figures_are_drawn_scenario_by_scenario_on_worker_processes(tmp_path: Path) -> None:
     """Each scenario's comparison and tuning maps, the same files whether drawn in this process or
     on two workers."""
@@ -136,6 +156,7 @@ def test_cli_errors_are_one_line_with_exit_code_2(tmp_path: Path) -> None:
         ["suite", "--horizons", "0"],
         ["suite", "--scheduler", "tcp://127.0.0.1:8786"],  # needs --backend dask
         ["run", "nope"],
+        ["run", "husky_point_stabilisation", "--solver", "opti"],  # bench's baseline only
     ):
         proc = subprocess.run([str(husky_sim), *args], capture_output=True, text=True, cwd=tmp_path)
         assert proc.returncode == 2, args
