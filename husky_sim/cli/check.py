@@ -80,8 +80,8 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
         nargs=2,
         metavar=("LOW", "HIGH"),
         default=None,
-        help="payload range drawn, kg in [0, 75] (default: the whole range, up to the Husky's "
-        "maximum); check with the payload the robot will carry",
+        help="payload range drawn, kg in [0, 75] (default 0 to 20, Clearpath's rating for turning "
+        "in place); check with the payload the robot will carry",
     )
     check.add_argument(
         "--out", type=path_arg, default=None, help="output directory (default results/check__...)"
