@@ -24,7 +24,7 @@ class ControlResult:
     """One control step's decision and everything worth logging about it."""
 
     control: np.ndarray  # [v (m/s), omega (rad/s)] to apply now
-    predicted_states: np.ndarray  # (N+1, 3) planned [x, y, theta]
+    predicted_states: np.ndarray  # (N+1, 3) planned [x, y, theta], step k at plan_start_s + k tau
     predicted_controls: np.ndarray  # (N, 2) planned [v, omega]
     clf_slack: np.ndarray  # s_v (N,)
     decay_slack: np.ndarray  # s_h (N,); ones where s_h is not a variable
@@ -45,6 +45,9 @@ class ControlResult:
     # no solver ran: every problem of the step had been solved before, this step or the last, bit
     # for bit, and its answer was reused (controllers.backends.repeats)
     repeated: bool = False
+    #: when the plan starts after the measurement it was solved from (s): 0 for a plan from the
+    #: measured pose; husky-cbf's starts where the drive acts on its first command (its dead time)
+    plan_start_s: float = 0.0
 
     @property
     def is_fallback(self) -> bool:

@@ -283,7 +283,7 @@ class HuskyCBFController:
         z0, omega_now = self._initial_state(pose, turn)
         t_plan = t + self._pipe.delay_s  # the plan starts when the drive acts on its first command
         sampled = reference.sample(t_plan, base.tau_s, base.horizon)
-        now = sampled[0][0].copy()  # the reference at t, before guidance replaces it
+        now = sampled[0][0].copy()  # the reference at t_plan, before guidance replaces it
         stationary = self._nearly_stationary(reference, float(sampled[1][0, 0]))
         ref_states, ref_controls, guided = self._reference(
             pose, estimate, float(z0[3]), reference, sampled, stationary, obstacles, t
@@ -349,6 +349,7 @@ class HuskyCBFController:
             guided=guided,
             solver=raw.solver,
             solver_fallback="; ".join(dict.fromkeys(self._solver_fallbacks)),
+            plan_start_s=self._pipe.delay_s,
         )
 
     def _barriers(self, plan: ExtendedPlan, p: np.ndarray, layout: Layout, n_real: int) -> np.ndarray:

@@ -335,7 +335,11 @@ class ControllerNode:
     def _publish_plan(self, result: ControlResult, stamp: float) -> None:
         frame = self.settings.odom_frame
         poses = [
-            msg.make(msg.POSE_STAMPED, header=msg.header(stamp + k * self.tau_s, frame), pose=msg.pose(*xs))
+            msg.make(
+                msg.POSE_STAMPED,
+                header=msg.header(stamp + result.plan_start_s + k * self.tau_s, frame),
+                pose=msg.pose(*xs),
+            )
             for k, xs in enumerate(result.predicted_states)
             if np.all(np.isfinite(xs))
         ]

@@ -110,12 +110,15 @@ class DdsRobot:
         twist = self._await_command()
         path = take_latest(self._plan)
         plan = np.full((self.horizon + 1, 3), np.nan)
+        plan_start_s = 0.0
         if path is not None and abs(msg.from_time(path.header.stamp) - t) < 1e-6:
             poses = [
                 (p.pose.position.x, p.pose.position.y, msg.quaternion_yaw(p.pose.orientation))
                 for p in path.poses
             ]
             plan[: min(len(poses), self.horizon + 1)] = poses[: self.horizon + 1]
+            if path.poses:  # the first pose's stamp says when the plan starts (after a dead time)
+                plan_start_s = msg.from_time(path.poses[0].header.stamp) - t
         replied = twist is not None
         control = np.array([twist.linear.x, twist.angular.z]) if replied else np.zeros(2)
         return ControlResult(
@@ -133,6 +136,7 @@ class DdsRobot:
             solve_time_s=time.perf_counter() - start,
             obstacles_considered=len(obstacles),
             obstacles_ignored=0,
+            plan_start_s=plan_start_s,
         )
 
     def _odometry(self, state: np.ndarray, t: float) -> object:

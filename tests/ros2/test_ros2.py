@@ -222,6 +222,9 @@ def test_node_commands_on_fresh_odometry_and_stops_the_robot_otherwise(husky_cbf
     assert any(t.linear.x > 0.1 for t in driven), "fresh odometry must give a driving command"
     plans = take_all(robot.plan)
     assert plans and len(plans[-1].poses) == 6 and plans[-1].header.frame_id == "odom"
+    # husky-cbf's plan starts where the drive acts on its first command: a dead time after the odometry
+    stamps = [msg.from_time(p.header.stamp) - msg.from_time(plans[-1].header.stamp) for p in plans[-1].poses]
+    assert stamps[0] == pytest.approx(0.34, abs=1e-5) and np.diff(stamps) == pytest.approx(0.2, abs=1e-5)
     elsewhere = msg.make(
         msg.POSE_STAMPED, header=msg.header(time.time(), "map"), pose=msg.pose(9.0, 9.0, 0.0)
     )
