@@ -61,20 +61,20 @@ class CommandPipe:
             last = self._stream[-1]
             self._stream.append(last + np.clip(target - last, -self._step_limit, self._step_limit))
 
-    def _acting(self, first: int, count: int, sent_since: int) -> list[np.ndarray]:
-        """The commands acting over `count` samples from `first` samples after the last control
-        instant, `sent_since` samples having been sent since that instant."""
-        return [self._stream[-(self._delay - i + sent_since)] for i in range(first, first + count)]
+    def _acting(self, count: int, sent_since: int) -> list[np.ndarray]:
+        """The commands acting over the first `count` samples after the last control instant,
+        `sent_since` samples having been sent since that instant."""
+        return [self._stream[-(self._delay - i + sent_since)] for i in range(count)]
 
     def predict_dead_time(self, pose: np.ndarray, omega_radps: float) -> tuple[np.ndarray, float]:
         """Pose (x m, y m, theta rad) and body yaw rate (rad/s) after the dead time, from `pose` and
         `omega_radps` now, under the commands already sent (call before `send`)."""
-        return self._integrate(pose, omega_radps, self._acting(0, self._delay, 0))
+        return self._integrate(pose, omega_radps, self._acting(self._delay, 0))
 
     def predict_step(self, pose: np.ndarray, omega_radps: float) -> tuple[np.ndarray, float, float]:
         """Over the control step that starts now (call after `send`-ing its command): the pose
         and body yaw rate at its end, and the mean body speed over it (m/s)."""
-        acting = self._acting(0, SUBSTEPS, SUBSTEPS)
+        acting = self._acting(SUBSTEPS, SUBSTEPS)
         end_pose, end_omega = self._integrate(pose, omega_radps, acting)
         return end_pose, end_omega, float(np.mean([a[0] for a in acting]))
 
