@@ -35,19 +35,44 @@ def _ros2_settings(args: argparse.Namespace, **fixed: object):
 def _add_ros2_arguments(parser: argparse.ArgumentParser) -> None:
     from dataclasses import fields
 
-    from husky_sim.ros2.settings import MAX_DOMAIN_ID, QOS_PROFILE_NAMES, Ros2Settings
+    from husky_sim.ros2.settings import MAX_DOMAIN_ID, QOS_PROFILE_NAMES, ROS_DISTRO_NAMES, Ros2Settings
 
     for f in fields(Ros2Settings):
         flag = "--" + f.name.replace("_", "-")
-        if f.name.endswith(("_topic", "_frame")):
+        if f.name.endswith(("_topic", "_frame")) or f.name == "node_name":
             parser.add_argument(flag, default=None, help=f"default {f.default}")
         elif f.name.endswith("_qos"):
             parser.add_argument(flag, choices=QOS_PROFILE_NAMES, default=None, help=f"default {f.default}")
+    parser.add_argument(
+        "--ros-distro",
+        choices=ROS_DISTRO_NAMES,
+        default=None,
+        help="message definitions on the wire (Cyclone DDS transport; the graph's gids differ: "
+        f"Humble's are 24 bytes, later ones' 16); default {ROS_DISTRO_NAMES[0]}",
+    )
+    parser.add_argument(
+        "--cmd-vel-stamped",
+        action="store_true",
+        default=None,
+        help="publish geometry_msgs/TwistStamped (Jazzy's diff-drive controllers take it)",
+    )
     parser.add_argument(
         "--domain-id",
         type=number_in(int, 0, MAX_DOMAIN_ID),
         default=None,
         help=f"DDS domain in [0, {MAX_DOMAIN_ID}] (default: ROS_DOMAIN_ID, else 0)",
+    )
+
+
+def _add_transport_argument(parser: argparse.ArgumentParser) -> None:
+    from husky_sim.ros2.settings import TRANSPORTS
+
+    parser.add_argument(
+        "--transport",
+        choices=TRANSPORTS,
+        default=TRANSPORTS[0],
+        help="the node's transport: Cyclone DDS from Python (no ROS install), or rclpy on the "
+        "middleware ROS 2 is configured for (settings become ROS parameters)",
     )
 
 
@@ -72,15 +97,26 @@ def cmd_serve(args: argparse.Namespace) -> int:
         if args.out
         else default_run_dir(sc.name, args.controller, horizon, gamma, sc.seed, "serve")
     )
+    if args.ros_args and args.transport != "rclpy":
+        raise UsageError("--ros-args: only the rclpy transport takes ROS arguments (--transport rclpy)")
     print(
-        f"serving {args.controller} N={horizon} on DDS domain {domain}: {settings.odometry_topic} + "
+        f"serving {args.controller} N={horizon} over {args.transport} on DDS domain {domain}: "
+        f"{settings.odometry_topic} + "
         f"{settings.obstacles_topic} + {settings.goal_topic} -> {settings.cmd_vel_topic} "
         f"every {sc.tau_s:g} s ({'sim' if settings.use_sim_time else 'wall'} clock); log -> {out}",
         flush=True,
     )
     try:
         stats = serve(
-            controller, sc.reference_object(), sc.tau_s, settings, out, args.duration, args.solve_budget
+            controller,
+            sc.reference_object(),
+            sc.tau_s,
+            settings,
+            out,
+            args.duration,
+            args.solve_budget,
+            args.transport,
+            args.ros_args or (),
         )
         reason = f"after {args.duration:g} s"
     except interrupts.RunInterrupted as exc:  # the normal way to stop a node: it has sent a zero command
@@ -112,7 +148,16 @@ def cmd_rehearse(args: argparse.Namespace) -> int:
         else default_run_dir(sc.name, args.controller, horizon, gamma, sc.seed, "rehearse")
     )
     announce_live(args)
-    summary = rehearse(sc, args.controller, out, args.domain_id, args.reply_timeout, live_port=args.live)
+    summary = rehearse(
+        sc,
+        args.controller,
+        out,
+        args.domain_id,
+        args.reply_timeout,
+        live_port=args.live,
+        transport=args.transport,
+        cmd_vel_stamped=args.cmd_vel_stamped,
+    )
     transport = summary["transport"]
     latency = transport["cmd_vel_latency_ms"]
     latency_text = (
@@ -156,6 +201,13 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     serve.add_argument("--use-sim-time", action="store_true", help="the node's clock is /clock (a simulator)")
     serve.add_argument("--localhost-only", action="store_true", help="keep DDS traffic on 127.0.0.1")
     _add_ros2_arguments(serve)
+    _add_transport_argument(serve)
+    serve.add_argument(
+        "--ros-args",
+        nargs=argparse.REMAINDER,
+        default=None,
+        help="(last; rclpy) ROS 2's arguments: -p name:=value sets a parameter, -r __node:=name renames",
+    )
     serve.set_defaults(func=cmd_serve)
     rehearse = sub.add_parser(
         "rehearse", help="drive the PyBullet Husky from a `serve` node in another process, over DDS"
@@ -178,5 +230,9 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
         "--reply-timeout", type=number_in(float, 0.01, 600.0), default=10.0,
         help="wall s to wait for each /cmd_vel before braking (counted)",
     )  # fmt: skip
+    _add_transport_argument(rehearse)
+    rehearse.add_argument(
+        "--cmd-vel-stamped", action="store_true", help="the node publishes geometry_msgs/TwistStamped"
+    )
     add_live_argument(rehearse)
     rehearse.set_defaults(func=cmd_rehearse)

@@ -1,10 +1,16 @@
-"""ROS 2 message types for Cyclone DDS, built from ROS 2's published message definitions.
+"""ROS 2 messages: Cyclone DDS types built from ROS 2's published message definitions, and the
+helpers that build a message of either family (those Cyclone DDS types or rclpy's classes).
 
-The field layouts come from the ROS 2 message definitions that `rosbags` ships (its
-`ros2_humble` type store: Clearpath's Husky A200 stack runs Humble), never from a hand-written
-copy; each becomes a Cyclone DDS `IdlStruct` under the name `rmw_cyclonedds_cpp` gives it on the
+The field layouts come from the ROS 2 message definitions that `rosbags` ships (a distribution's
+type store: Humble by default, which Clearpath's Husky A200 stack runs), never from a hand-written
+copy; each becomes a Cyclone DDS `IdlStruct` under the name ROS 2's middlewares give it on the
 wire (`geometry_msgs::msg::dds_::Twist_`), `@final` and serialised as plain CDR (XCDR1), which is
-what ROS 2's Cyclone RMW writes and reads. Cyclone DDS does the serialising.
+what ROS 2 writes and reads. Cyclone DDS does the serialising.
+
+Of the messages the node exchanges, Humble's and the newer distributions' definitions (Jazzy,
+Kilted: the `ros-rclpy` wheels') differ on the wire only in the graph's `rmw_dds_common/Gid`
+(24 bytes in Humble, 16 since Jazzy); `visualization_msgs/Marker` gained a constant
+(ARROW_STRIP), which is not on the wire. tests/ros2/test_rclpy.py checks this against the wheels.
 """
 
 from __future__ import annotations
@@ -13,14 +19,19 @@ import dataclasses
 import functools
 import math
 import types
+from collections.abc import Callable
 from typing import Any
 
 from cyclonedds.idl import IdlStruct
 from cyclonedds.idl import annotations as idl_annotations
 from cyclonedds.idl import types as idl
 
-#: The ROS 2 distribution whose message definitions are used (rosbags.typesys.Stores member).
-ROS_DISTRO = "ROS2_HUMBLE"
+from husky_sim.ros2.settings import ROS_DISTRO_NAMES
+
+#: Each distribution's rosbags.typesys.Stores member; the first is the default (Humble:
+#: Clearpath's A200 stack).
+ROS_DISTROS = {name: f"ROS2_{name.upper()}" for name in ROS_DISTRO_NAMES}
+DEFAULT_DISTRO = ROS_DISTRO_NAMES[0]
 
 _PRIMITIVES: dict[str, Any] = {
     "bool": bool,
@@ -41,10 +52,10 @@ _PRIMITIVES: dict[str, Any] = {
 
 
 @functools.cache
-def _typestore():
+def _typestore(distro: str):
     from rosbags.typesys import Stores, get_typestore
 
-    return get_typestore(getattr(Stores, ROS_DISTRO))
+    return get_typestore(getattr(Stores, ROS_DISTROS[distro]))
 
 
 def dds_type_name(ros_type: str) -> str:
@@ -53,7 +64,7 @@ def dds_type_name(ros_type: str) -> str:
     return f"{package}::{kind}::dds_::{name}_"
 
 
-def _default_for(spec: tuple) -> Any:
+def _default_for(spec: tuple, distro: str) -> Any:
     """A default-value factory for one field, so messages can be built field by field."""
     node, arg = spec
     kind = node.name
@@ -63,15 +74,15 @@ def _default_for(spec: tuple) -> Any:
             base, (lambda: 0.0) if base.startswith("float") else (lambda: 0)
         )
     if kind == "NAME":
-        return message_type(arg)
+        return message_type(arg, distro)
     if kind == "ARRAY":
         (inner_node, inner_arg), length = arg
-        inner = _default_for((inner_node, inner_arg))
+        inner = _default_for((inner_node, inner_arg), distro)
         return lambda: [inner() for _ in range(length)]
     return list  # SEQUENCE: empty
 
 
-def _annotation(spec: tuple) -> Any:
+def _annotation(spec: tuple, distro: str) -> Any:
     node, arg = spec
     kind = node.name
     if kind == "BASE":
@@ -80,32 +91,37 @@ def _annotation(spec: tuple) -> Any:
             return idl.bounded_str[bound]
         return _PRIMITIVES[base]
     if kind == "NAME":
-        return message_type(arg)
+        return message_type(arg, distro)
     (inner_spec, length) = arg
-    inner = _annotation(inner_spec)
+    inner = _annotation(inner_spec, distro)
     if kind == "ARRAY":
         return idl.array[inner, length]
     return idl.sequence[inner, length] if length else idl.sequence[inner]
 
 
-@functools.cache
-def message_type(ros_type: str) -> type:
-    """The Cyclone DDS type of a ROS 2 message, e.g. `message_type("geometry_msgs/msg/Twist")`.
+def message_type(ros_type: str, distro: str = DEFAULT_DISTRO) -> type:
+    """The Cyclone DDS type of a ROS 2 message in a distribution's definition, e.g.
+    `message_type("geometry_msgs/msg/Twist")`: one class per type and distribution.
 
     Fields have ROS 2's defaults (zeros, empty strings and sequences, default sub-messages).
     """
+    return _message_type(ros_type, distro)
+
+
+@functools.cache
+def _message_type(ros_type: str, distro: str) -> type:
     try:
-        _constants, fields = _typestore().fielddefs[ros_type]
+        _constants, fields = _typestore(distro).fielddefs[ros_type]
     except KeyError:
         raise ValueError(f"message type: {ros_type!r} is not a ROS 2 message type") from None
-    annotations = {name: _annotation(spec) for name, spec in fields}
+    annotations = {name: _annotation(spec, distro) for name, spec in fields}
     namespace = {
         "__annotations__": annotations,
         "__module__": __name__,
         "__qualname__": ros_type.split("/")[-1],
     }
     for name, spec in fields:
-        namespace[name] = dataclasses.field(default_factory=_default_for(spec))
+        namespace[name] = dataclasses.field(default_factory=_default_for(spec, distro))
     cls = types.new_class(
         ros_type.split("/")[-1],
         (IdlStruct,),
@@ -117,12 +133,14 @@ def message_type(ros_type: str) -> type:
 
 # The messages the node and the rehearsal robot exchange (ROS 2 type names).
 TWIST = "geometry_msgs/msg/Twist"
+TWIST_STAMPED = "geometry_msgs/msg/TwistStamped"  # Jazzy's diff-drive controllers take this
 ODOMETRY = "nav_msgs/msg/Odometry"
 POSE_STAMPED = "geometry_msgs/msg/PoseStamped"
 MARKER_ARRAY = "visualization_msgs/msg/MarkerArray"
 MARKER = "visualization_msgs/msg/Marker"
 PATH = "nav_msgs/msg/Path"
 CLOCK = "rosgraph_msgs/msg/Clock"
+PARTICIPANT_ENTITIES_INFO = "rmw_dds_common/msg/ParticipantEntitiesInfo"  # the ROS graph
 
 #: visualization_msgs/Marker constants (from the same definitions).
 MARKER_CYLINDER = 3
@@ -130,28 +148,9 @@ MARKER_ADD = 0
 MARKER_DELETEALL = 3
 
 
-def make(ros_type: str, **fields: Any) -> Any:
-    """A message of a ROS 2 type with the given fields (others at their defaults)."""
-    return message_type(ros_type)(**fields)
-
-
-def to_time(t_s: float) -> Any:
-    """builtin_interfaces/Time of t_s seconds (rounded to the nanosecond)."""
-    total = round(t_s * 1e9)
-    sec, nanosec = divmod(total, 1_000_000_000)
-    return make("builtin_interfaces/msg/Time", sec=int(sec), nanosec=int(nanosec))
-
-
 def from_time(stamp: Any) -> float:
     """Seconds of a builtin_interfaces/Time."""
     return stamp.sec + 1e-9 * stamp.nanosec
-
-
-def yaw_quaternion(yaw_rad: float) -> Any:
-    """geometry_msgs/Quaternion of a rotation by yaw_rad about z."""
-    return make(
-        "geometry_msgs/msg/Quaternion", x=0.0, y=0.0, z=math.sin(yaw_rad / 2), w=math.cos(yaw_rad / 2)
-    )
 
 
 def quaternion_yaw(q: Any) -> float:
@@ -159,14 +158,52 @@ def quaternion_yaw(q: Any) -> float:
     return math.atan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z))
 
 
-def pose(x_m: float, y_m: float, yaw_rad: float) -> Any:
-    """geometry_msgs/Pose in the plane."""
-    return make(
-        "geometry_msgs/msg/Pose",
-        position=make("geometry_msgs/msg/Point", x=float(x_m), y=float(y_m), z=0.0),
-        orientation=yaw_quaternion(float(yaw_rad)),
-    )
+@dataclasses.dataclass(frozen=True)
+class MessageKit:
+    """Builds ROS 2 messages of one family: `type_of("nav_msgs/msg/Odometry")` gives its class
+    (our Cyclone DDS types, or rclpy's generated ones: the same fields either way)."""
+
+    type_of: Callable[[str], type]
+
+    def make(self, ros_type: str, **fields: Any) -> Any:
+        """A message of a ROS 2 type with the given fields (others at their defaults)."""
+        return self.type_of(ros_type)(**fields)
+
+    def to_time(self, t_s: float) -> Any:
+        """builtin_interfaces/Time of t_s seconds (rounded to the nanosecond)."""
+        sec, nanosec = divmod(round(t_s * 1e9), 1_000_000_000)
+        return self.make("builtin_interfaces/msg/Time", sec=int(sec), nanosec=int(nanosec))
+
+    def yaw_quaternion(self, yaw_rad: float) -> Any:
+        """geometry_msgs/Quaternion of a rotation by yaw_rad about z."""
+        return self.make(
+            "geometry_msgs/msg/Quaternion", x=0.0, y=0.0, z=math.sin(yaw_rad / 2), w=math.cos(yaw_rad / 2)
+        )
+
+    def pose(self, x_m: float, y_m: float, yaw_rad: float) -> Any:
+        """geometry_msgs/Pose in the plane."""
+        return self.make(
+            "geometry_msgs/msg/Pose",
+            position=self.make("geometry_msgs/msg/Point", x=float(x_m), y=float(y_m), z=0.0),
+            orientation=self.yaw_quaternion(float(yaw_rad)),
+        )
+
+    def header(self, t_s: float, frame_id: str) -> Any:
+        """std_msgs/Header stamped t_s (s) in frame_id."""
+        return self.make("std_msgs/msg/Header", stamp=self.to_time(t_s), frame_id=frame_id)
 
 
-def header(t_s: float, frame_id: str) -> Any:
-    return make("std_msgs/msg/Header", stamp=to_time(t_s), frame_id=frame_id)
+def cyclone_kit(distro: str = DEFAULT_DISTRO) -> MessageKit:
+    """The kit of our Cyclone DDS types in a distribution's definitions."""
+    return MessageKit(functools.partial(message_type, distro=distro))
+
+
+# The default distribution's kit, for code and tests that build messages without a transport.
+_DEFAULT = cyclone_kit()
+make, to_time, yaw_quaternion, pose, header = (
+    _DEFAULT.make,
+    _DEFAULT.to_time,
+    _DEFAULT.yaw_quaternion,
+    _DEFAULT.pose,
+    _DEFAULT.header,
+)

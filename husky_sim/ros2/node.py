@@ -1,11 +1,13 @@
-"""`husky-sim serve`: one of our controllers as a ROS 2-compatible node over DDS (no ROS install).
+"""`husky-sim serve`: one of our controllers as a ROS 2 node, on either transport
+(husky_sim.ros2.transport: Cyclone DDS without a ROS install, or rclpy where ROS 2 is installed).
 
 In: odometry (nav_msgs/Odometry, sensor-data QoS), a goal (geometry_msgs/PoseStamped on
 /goal_pose; until one arrives the scenario's reference is tracked), obstacles
 (visualization_msgs/MarkerArray of cylinders: centre, diameter = scale.x; velocities estimated
 from successive markers of the same id) and, with use_sim_time, /clock. Goals and markers must
 be in the odom frame (or have no frame): there is no tf here, so others are refused and counted.
-Out: geometry_msgs/Twist on /cmd_vel once per tau and the plan as nav_msgs/Path.
+Out: geometry_msgs/Twist (or TwistStamped with cmd_vel_stamped, stamped with the odometry it
+answers) on /cmd_vel once per tau and the plan as nav_msgs/Path.
 
 A control step runs on the first odometry sample at least tau (of odometry stamps) after the
 previous step's. Safety, each event counted and logged as a row of `serve.csv`:
@@ -30,19 +32,12 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-from cyclonedds.core import InstanceState, ReadCondition, SampleState, ViewState, WaitSet
-from cyclonedds.util import duration
 
 from controllers import Controller, ControlResult, Obstacle, Reference, SetPoint
 from husky_sim import interrupts
 from husky_sim.ros2 import messages as msg
 from husky_sim.ros2.settings import Ros2Settings
-from husky_sim.ros2.transport import (
-    Participant,
-    take_all,
-    take_latest,
-    topic_qos,
-)
+from husky_sim.ros2.transport import latest, open_transport
 
 #: Odometry older than this many control periods (on the node's clock) stops the robot.
 STALE_ODOMETRY_PERIODS = 2.0
@@ -169,31 +164,30 @@ class ControllerNode:
         settings: Ros2Settings,
         out_dir: Path | None = None,
         solve_budget_s: float | None = None,
+        transport: str = "cyclonedds",
+        ros_args: Sequence[str] = (),
     ) -> None:
         """`solve_budget_s` (s, default tau): a solve that takes longer is an overrun; less than
-        tau leaves time for the transport and the drive."""
-        self.controller, self.reference, self.tau_s, self.settings = controller, reference, tau_s, settings
+        tau leaves time for the transport and the drive. `transport` and `ros_args`: see
+        husky_sim.ros2.transport.open_transport (with rclpy, `settings` become the node's ROS
+        parameters' defaults, and `self.settings` what the parameters say)."""
+        self.controller, self.reference, self.tau_s = controller, reference, tau_s
         self.solve_budget_s = tau_s if solve_budget_s is None else solve_budget_s
         if not 0.0 < self.solve_budget_s <= tau_s:
             raise ValueError(
                 f"solve_budget_s: must be in (0, tau = {tau_s:g}] s, got {self.solve_budget_s:g}"
             )
         self.stats = ServeStats()
-        self._dds = Participant(settings)
-        s = settings
-        self._odom = self._dds.reader(s.odometry_topic, msg.ODOMETRY, topic_qos(s, "odometry"))
-        self._goal = self._dds.reader(s.goal_topic, msg.POSE_STAMPED, topic_qos(s, "goal"))
-        self._markers = self._dds.reader(s.obstacles_topic, msg.MARKER_ARRAY, topic_qos(s, "obstacles"))
-        self._clock = (
-            self._dds.reader(s.clock_topic, msg.CLOCK, topic_qos(s, "clock")) if s.use_sim_time else None
-        )
-        self.cmd_vel = self._dds.writer(s.cmd_vel_topic, msg.TWIST, topic_qos(s, "cmd_vel"))
-        self._plan = self._dds.writer(s.plan_topic, msg.PATH, topic_qos(s, "plan"))
-        self._waitset = WaitSet(self._dds.participant)
-        mask = SampleState.NotRead | ViewState.Any | InstanceState.Any
-        for reader in (self._odom, self._goal, self._markers, self._clock):
-            if reader is not None:
-                self._waitset.attach(ReadCondition(reader, mask))
+        self.transport = open_transport(settings, transport, ros_args)
+        self.settings = s = self.transport.settings
+        self.msg = self.transport.messages
+        t = self.transport
+        self._odom = t.subscribe("odometry", msg.ODOMETRY)
+        self._goal = t.subscribe("goal", msg.POSE_STAMPED)
+        self._markers = t.subscribe("obstacles", msg.MARKER_ARRAY)
+        self._clock = t.subscribe("clock", msg.CLOCK) if s.use_sim_time else None
+        self.cmd_vel = t.publish("cmd_vel", msg.TWIST_STAMPED if s.cmd_vel_stamped else msg.TWIST)
+        self._plan = t.publish("plan", msg.PATH)
         self._tracker = ObstacleTracker()
         self._sim_now: float | None = None
         self._last_odom_stamp: float | None = None
@@ -210,6 +204,11 @@ class ControllerNode:
             self._log_file.flush()
         controller.reset()
 
+    def connected(self) -> bool:
+        """Whether the node has matched an odometry publisher and a cmd_vel subscriber (from its
+        side: with two middlewares, each side's discovery finishes at its own time)."""
+        return bool(self._odom.publishers() and self.cmd_vel.subscribers())
+
     # -- clock ---------------------------------------------------------------------------------
     def now(self) -> float | None:
         """The node's clock (s): /clock with use_sim_time, else ROS time (the system clock)."""
@@ -223,40 +222,41 @@ class ControllerNode:
         try:
             while not stop() and time.monotonic() < end:
                 interrupts.check()
-                self._waitset.wait(duration(milliseconds=max(1, int(250 * self.tau_s))))
+                self.transport.wait(0.25 * self.tau_s)
                 self.poll()
         finally:
             with interrupts.deferred():
-                self._publish_twist(np.zeros(2))
+                self._publish_twist(np.zeros(2), self.now())
                 self._log_row("shutdown", "shutdown", np.zeros(2))
                 self._flush_acks()
                 self.close()
 
     def poll(self) -> None:
         """Read everything waiting and act on it once."""
-        goal = take_latest(self._goal)
+        goal = latest(self._goal.take())
         if goal is not None:
+            goal = goal.message
             if goal.header.frame_id in ("", self.settings.odom_frame):
                 p = goal.pose
                 self.reference = SetPoint(p.position.x, p.position.y, msg.quaternion_yaw(p.orientation))
                 self.stats.goals_received += 1
             else:  # no tf here: a goal in another frame would be driven to in the wrong place
                 self.stats.rejected["goals"] += 1
-        for array in take_all(self._markers):
-            self.stats.rejected["markers"] += self._tracker.update(array, self.settings.odom_frame)
+        for array in self._markers.take():
+            self.stats.rejected["markers"] += self._tracker.update(array.message, self.settings.odom_frame)
         if self._clock is not None:
-            clock = take_latest(self._clock)
+            clock = latest(self._clock.take())
             if clock is not None:
-                self._sim_now = msg.from_time(clock.clock)
-        odom = take_latest(self._odom)
+                self._sim_now = msg.from_time(clock.message.clock)
+        odom = latest(self._odom.take())
         if odom is not None:
-            stamp = msg.from_time(odom.header.stamp)
+            stamp = msg.from_time(odom.message.header.stamp)
             self._last_odom_stamp = stamp
-            latency_ms = (time.time_ns() - odom.sample_info.source_timestamp) / 1e6
+            latency_ms = (time.time_ns() - odom.sent_ns) / 1e6
             self.stats.odom_latency_ms.append(latency_ms)
             if stamp >= self._next_step_stamp - 1e-3 * self.tau_s:
                 self._next_step_stamp = stamp + self.tau_s
-                self._control_step(odom, stamp, latency_ms)
+                self._control_step(odom.message, stamp, latency_ms)
         self._watchdog()
 
     def _watchdog(self) -> None:
@@ -266,7 +266,7 @@ class ControllerNode:
         age = math.inf if self._last_odom_stamp is None else now - self._last_odom_stamp
         if age > STALE_ODOMETRY_PERIODS * self.tau_s and now >= self._next_stale_at:
             self._next_stale_at = now + self.tau_s
-            self._publish_twist(np.zeros(2))
+            self._publish_twist(np.zeros(2), now)
             self._log_row("stale", f"odometry age {age:.3g} s", np.zeros(2), odom_age_s=age)
 
     def _control_step(self, odom: object, stamp: float, latency_ms: float) -> None:
@@ -295,7 +295,7 @@ class ControllerNode:
         else:
             event, command = "command", np.asarray(result.control, dtype=float)
             self._publish_plan(result, stamp)
-        self._publish_twist(command)
+        self._publish_twist(command, stamp)
         counts = self.stats.controller_counts
         counts["fallbacks"] += result.is_fallback
         counts["solver_fallbacks"] += bool(result.solver_fallback)
@@ -327,23 +327,29 @@ class ControllerNode:
         )
 
     # -- output --------------------------------------------------------------------------------
-    def _publish_twist(self, command: np.ndarray) -> None:
-        twist = msg.make(msg.TWIST)
+    def _publish_twist(self, command: np.ndarray, stamp: float | None) -> None:
+        """A command; stamped (cmd_vel_stamped) with the odometry it answers, else the node's clock."""
+        twist = self.msg.make(msg.TWIST)
         twist.linear.x, twist.angular.z = float(command[0]), float(command[1])
+        if self.settings.cmd_vel_stamped:
+            t_s = time.time() if stamp is None else stamp
+            twist = self.msg.make(
+                msg.TWIST_STAMPED, header=self.msg.header(t_s, self.settings.base_frame), twist=twist
+            )
         self.cmd_vel.write(twist)
 
     def _publish_plan(self, result: ControlResult, stamp: float) -> None:
-        frame = self.settings.odom_frame
+        frame, kit = self.settings.odom_frame, self.msg
         poses = [
-            msg.make(
+            kit.make(
                 msg.POSE_STAMPED,
-                header=msg.header(stamp + result.plan_start_s + k * self.tau_s, frame),
-                pose=msg.pose(*xs),
+                header=kit.header(stamp + result.plan_start_s + k * self.tau_s, frame),
+                pose=kit.pose(*xs),
             )
             for k, xs in enumerate(result.predicted_states)
             if np.all(np.isfinite(xs))
         ]
-        self._plan.write(msg.make(msg.PATH, header=msg.header(stamp, frame), poses=poses))
+        self._plan.write(kit.make(msg.PATH, header=kit.header(stamp, frame), poses=poses))
 
     def _log_row(self, event: str, status: str, command: np.ndarray, **fields: object) -> None:
         """Count an event and write its row of serve.csv (columns not given are left empty)."""
@@ -361,9 +367,10 @@ class ControllerNode:
     def _flush_acks(self) -> None:
         """Give the last (zero) command time to reach reliable subscribers before leaving."""
         with contextlib.suppress(Exception):  # best effort: a vanished subscriber is not an error here
-            self.cmd_vel.wait_for_acks(duration(milliseconds=500))
+            self.cmd_vel.wait_for_acks(0.5)
 
     def close(self) -> None:
+        self.transport.close()
         if self._log_file is not None:
             self._log_file.close()
             self._log_file = None
@@ -382,32 +389,42 @@ def serve(
     out_dir: Path | None = None,
     duration_s: float | None = None,
     solve_budget_s: float | None = None,
+    transport: str = "cyclonedds",
+    ros_args: Sequence[str] = (),
 ) -> ServeStats:
     """Run a node until interrupted or duration_s (wall) has passed; return its counts."""
-    node = ControllerNode(controller, reference, tau_s, settings, out_dir, solve_budget_s)
+    node = ControllerNode(
+        controller, reference, tau_s, settings, out_dir, solve_budget_s, transport, ros_args
+    )
     node.spin(duration_s=duration_s)
     return node.stats
 
 
 def obstacles_to_markers(
-    obstacles: Sequence[Obstacle], stamp_s: float, frame_id: str, height_m: float = 1.0
+    obstacles: Sequence[Obstacle],
+    stamp_s: float,
+    frame_id: str,
+    height_m: float = 1.0,
+    kit: msg.MessageKit | None = None,
 ) -> object:
     """A MarkerArray of cylinders (one per obstacle, id = index, action ADD, which replaces the
-    marker of the same id) that RViz and Foxglove draw and ObstacleTracker reads back."""
+    marker of the same id) that RViz and Foxglove draw and ObstacleTracker reads back; built with
+    `kit` (default: our Cyclone DDS types)."""
+    kit = kit or msg.cyclone_kit()
     markers = []
     for i, o in enumerate(obstacles):
-        m = msg.make(
+        m = kit.make(
             msg.MARKER,
-            header=msg.header(stamp_s, frame_id),
+            header=kit.header(stamp_s, frame_id),
             ns="obstacles",
             id=i,
             type=msg.MARKER_CYLINDER,
             action=msg.MARKER_ADD,
-            pose=msg.pose(o.x_m, o.y_m, 0.0),
+            pose=kit.pose(o.x_m, o.y_m, 0.0),
         )
         m.pose.position.z = 0.5 * height_m
         m.scale.x = m.scale.y = 2.0 * o.radius_m
         m.scale.z = height_m
         m.color.r, m.color.g, m.color.b, m.color.a = 0.8, 0.2, 0.2, 0.8
         markers.append(m)
-    return msg.make(msg.MARKER_ARRAY, markers=markers)
+    return kit.make(msg.MARKER_ARRAY, markers=markers)

@@ -12,8 +12,16 @@ from pathlib import Path
 #: DDS domain ids Cyclone DDS can map to ports (ROS 2 recommends 0 to 101 on Linux).
 MAX_DOMAIN_ID = 232
 
-#: The QoS profiles a topic's setting may name (ROS 2's names; husky_sim.ros2.transport has them).
+#: The QoS profiles a topic's setting may name (ROS 2's names; each transport makes them).
 QOS_PROFILE_NAMES = ("sensor_data", "default", "clock")
+
+#: The transports a node can run on: Cyclone DDS from Python (no ROS install), or rclpy on
+#: whatever middleware ROS 2 is configured for (RMW_IMPLEMENTATION; Fast DDS by default).
+TRANSPORTS = ("cyclonedds", "rclpy")
+
+#: Distributions whose message definitions the Cyclone DDS transport can speak
+#: (husky_sim.ros2.messages.ROS_DISTROS has their type stores; the first is the default).
+ROS_DISTRO_NAMES = ("humble", "jazzy", "kilted")
 
 
 def domain_id_from_env(environ: dict[str, str] | None = None) -> int:
@@ -82,6 +90,9 @@ class Ros2Settings:
     odom_frame: str = "odom"  # frame of poses, obstacles and plans
     base_frame: str = "base_link"  # odometry's child frame
     use_sim_time: bool = False  # the node's clock is /clock (a simulator) instead of the wall clock
+    cmd_vel_stamped: bool = False  # geometry_msgs/TwistStamped on cmd_vel (Jazzy's diff-drive)
+    node_name: str = "husky_sim_controller"  # the node's name in the ROS graph
+    ros_distro: str = ROS_DISTRO_NAMES[0]  # message definitions on the wire (Cyclone DDS transport)
     domain_id: int | None = None
     localhost_only: bool = False  # keep DDS traffic on 127.0.0.1 (rehearsals)
 
@@ -98,6 +109,16 @@ class Ros2Settings:
                 raise ValueError(
                     f"{f.name}: expected one of {', '.join(QOS_PROFILE_NAMES)}, got {str(profile)[:40]!r}"
                 )
+        if not re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]*", self.node_name):
+            raise ValueError(
+                "node_name: expected a ROS 2 node name like husky_sim_controller, "
+                f"got {self.node_name[:40]!r}"
+            )
+        if self.ros_distro not in ROS_DISTRO_NAMES:
+            raise ValueError(
+                f"ros_distro: expected one of {', '.join(ROS_DISTRO_NAMES)}, "
+                f"got {str(self.ros_distro)[:40]!r}"
+            )
         if self.domain_id is not None:
             check_domain_id(self.domain_id)
 

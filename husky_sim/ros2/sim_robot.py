@@ -11,13 +11,12 @@ so the loop is in lock-step with the node whatever the transport's latency, whic
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from collections.abc import Sequence
 
 import numpy as np
-from cyclonedds.core import InstanceState, ReadCondition, SampleState, ViewState, WaitSet
-from cyclonedds.util import duration
 
 from controllers import ControlResult, Obstacle, Reference, SetPoint
 from controllers.model import wrap_angle
@@ -25,12 +24,10 @@ from husky_sim import interrupts
 from husky_sim.ros2 import messages as msg
 from husky_sim.ros2.node import obstacles_to_markers
 from husky_sim.ros2.settings import Ros2Settings
-from husky_sim.ros2.transport import (
-    Participant,
-    take_all,
-    take_latest,
-    topic_qos,
-)
+from husky_sim.ros2.transport import latest, open_transport
+
+#: The rehearsal robot's name in the ROS graph.
+ROBOT_NODE_NAME = "husky_sim_robot"
 
 
 class NodeNotFound(ConnectionError):
@@ -50,18 +47,14 @@ class DdsRobot:
             horizon,
             reply_timeout_s,
         )
-        self._dds = Participant(settings)
-        s = settings
-        self._odom = self._dds.writer(s.odometry_topic, msg.ODOMETRY, topic_qos(s, "odometry"))
-        self._markers = self._dds.writer(s.obstacles_topic, msg.MARKER_ARRAY, topic_qos(s, "obstacles"))
-        self._clock = self._dds.writer(s.clock_topic, msg.CLOCK, topic_qos(s, "clock"))
-        self._goal = self._dds.writer(s.goal_topic, msg.POSE_STAMPED, topic_qos(s, "goal"))
-        self._cmd = self._dds.reader(s.cmd_vel_topic, msg.TWIST, topic_qos(s, "cmd_vel"))
-        self._plan = self._dds.reader(s.plan_topic, msg.PATH, topic_qos(s, "plan"))
-        self._waitset = WaitSet(self._dds.participant)
-        self._waitset.attach(
-            ReadCondition(self._cmd, SampleState.NotRead | ViewState.Any | InstanceState.Any)
-        )
+        self._dds = t = open_transport(dataclasses.replace(settings, node_name=ROBOT_NODE_NAME))
+        self.kit = t.messages
+        self._odom = t.publish("odometry", msg.ODOMETRY)
+        self._markers = t.publish("obstacles", msg.MARKER_ARRAY)
+        self._clock = t.publish("clock", msg.CLOCK)
+        self._goal = t.publish("goal", msg.POSE_STAMPED)
+        self._cmd = t.subscribe("cmd_vel", msg.TWIST_STAMPED if settings.cmd_vel_stamped else msg.TWIST)
+        self._plan = t.subscribe("plan", msg.PATH)
         self.cmd_latency_ms: list[float] = []
         self.reply_timeouts = 0
         self._previous: tuple[float, np.ndarray] | None = None
@@ -73,8 +66,8 @@ class DdsRobot:
         entities = (self._odom, self._markers, self._goal, self._clock)
         while time.monotonic() < end:
             interrupts.check()
-            writers_matched = all(w.get_matched_subscriptions() for w in entities)
-            if writers_matched and all(r.get_matched_publications() for r in (self._cmd, self._plan)):
+            writers_matched = all(w.subscribers() for w in entities)
+            if writers_matched and all(r.publishers() for r in (self._cmd, self._plan)):
                 return
             time.sleep(0.02)
         raise NodeNotFound(
@@ -90,25 +83,26 @@ class DdsRobot:
         self, state: np.ndarray, reference: Reference, obstacles: Sequence[Obstacle], t: float
     ) -> ControlResult:
         start = time.perf_counter()
-        frame = self.settings.odom_frame
+        frame, kit = self.settings.odom_frame, self.kit
         if isinstance(reference, SetPoint) and not self._goal_sent:  # as RViz's "2D Goal Pose" does
-            goal = msg.make(
+            goal = kit.make(
                 msg.POSE_STAMPED,
-                header=msg.header(t, frame),
-                pose=msg.pose(reference.x_m, reference.y_m, reference.theta_rad),
+                header=kit.header(t, frame),
+                pose=kit.pose(reference.x_m, reference.y_m, reference.theta_rad),
             )
             self._goal.write(goal)
-            self._goal.wait_for_acks(duration(seconds=1))
+            self._goal.wait_for_acks(1.0)
             self._goal_sent = True
-        take_all(self._cmd)  # nothing from before this step may pass for its answer
+        self._cmd.take()  # nothing from before this step may pass for its answer
         # obstacles first, and acknowledged, so the node never plans step k with step k-1's
         # obstacles; the clock last, so the node never sees time t before the odometry stamped t
-        self._markers.write(obstacles_to_markers(obstacles, t, frame))
-        self._markers.wait_for_acks(duration(seconds=self.reply_timeout_s))
+        self._markers.write(obstacles_to_markers(obstacles, t, frame, kit=kit))
+        self._markers.wait_for_acks(self.reply_timeout_s)
         self._odom.write(self._odometry(state, t))
-        self._clock.write(msg.make(msg.CLOCK, clock=msg.to_time(t)))
+        self._clock.write(kit.make(msg.CLOCK, clock=kit.to_time(t)))
         twist = self._await_command()
-        path = take_latest(self._plan)
+        path = latest(self._plan.take())
+        path = None if path is None else path.message
         plan = np.full((self.horizon + 1, 3), np.nan)
         plan_start_s = 0.0
         if path is not None and abs(msg.from_time(path.header.stamp) - t) < 1e-6:
@@ -142,11 +136,12 @@ class DdsRobot:
     def _odometry(self, state: np.ndarray, t: float) -> object:
         """Odometry of the sensed pose; its twist is the body velocity between this pose and the
         previous one (what a state estimator would give without wheel data)."""
-        odom = msg.make(
+        kit = self.kit
+        odom = kit.make(
             msg.ODOMETRY,
-            header=msg.header(t, self.settings.odom_frame),
+            header=kit.header(t, self.settings.odom_frame),
             child_frame_id=self.settings.base_frame,
-            pose=msg.make("geometry_msgs/msg/PoseWithCovariance", pose=msg.pose(*state)),
+            pose=kit.make("geometry_msgs/msg/PoseWithCovariance", pose=kit.pose(*state)),
         )
         if self._previous is not None and t > self._previous[0]:
             dt = t - self._previous[0]
@@ -157,14 +152,14 @@ class DdsRobot:
         return odom
 
     def _await_command(self) -> object | None:
+        """The node's next command (its Twist, also when it sends TwistStamped), or None."""
         end = time.monotonic() + self.reply_timeout_s
         while time.monotonic() < end:
             interrupts.check()
-            samples = take_all(self._cmd)
-            if samples:
-                twist = samples[-1]
-                self.cmd_latency_ms.append((time.time_ns() - twist.sample_info.source_timestamp) / 1e6)
-                return twist
-            self._waitset.wait(duration(milliseconds=20))
+            command = latest(self._cmd.take())
+            if command is not None:
+                self.cmd_latency_ms.append((time.time_ns() - command.sent_ns) / 1e6)
+                return command.message.twist if self.settings.cmd_vel_stamped else command.message
+            self._dds.wait(0.02)
         self.reply_timeouts += 1
         return None

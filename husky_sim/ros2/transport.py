@@ -1,106 +1,103 @@
-"""DDS transport with ROS 2's conventions: topic names, QoS profiles, participants.
+"""What the node and the rehearsal robot need of a ROS 2 transport, and how to open one.
 
-A ROS 2 topic `/cmd_vel` is the DDS topic `rt/cmd_vel` (rmw_cyclonedds_cpp's mapping); samples are
-plain CDR (XCDR1), as ROS 2's Cyclone RMW writes them. The QoS profiles are ROS 2's:
-`sensor_data` (best effort, keep last 5) for odometry, the default (reliable, keep last 10) for
-commands, goals, plans and obstacles, and the clock's (best effort, keep last 1).
+Two transports implement it: `cyclonedds` (husky_sim.ros2.cyclone_transport: Cyclone DDS from
+Python, no ROS install) and `rclpy` (husky_sim.ros2.rclpy_transport: ROS 2's Python client
+library, on whatever middleware the machine is configured for). A topic is named by its setting's
+stem (`"odometry"` -> `settings.odometry_topic`, QoS `settings.odometry_qos`), so both ends of a
+topic always take its name and QoS profile from the same place.
 """
 
 from __future__ import annotations
 
-from typing import Any
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any, Protocol
 
-from cyclonedds.core import Policy, Qos
-from cyclonedds.domain import Domain, DomainParticipant
-from cyclonedds.pub import DataWriter
-from cyclonedds.sub import DataReader
-from cyclonedds.topic import Topic
-from cyclonedds.util import duration
-
-from husky_sim.ros2.messages import message_type
-from husky_sim.ros2.settings import QOS_PROFILE_NAMES, Ros2Settings
-
-_XCDR1 = Policy.DataRepresentation(use_cdrv0_representation=True)
-
-SENSOR_DATA_QOS = Qos(
-    Policy.Reliability.BestEffort,
-    Policy.History.KeepLast(5),
-    Policy.Durability.Volatile,
-    _XCDR1,
-)
-DEFAULT_QOS = Qos(
-    Policy.Reliability.Reliable(duration(milliseconds=100)),
-    Policy.History.KeepLast(10),
-    Policy.Durability.Volatile,
-    _XCDR1,
-)
-CLOCK_QOS = Qos(Policy.Reliability.BestEffort, Policy.History.KeepLast(1), Policy.Durability.Volatile, _XCDR1)
-#: The profiles a topic's QoS setting may name (ROS 2's names).
-QOS_PROFILES: dict[str, Qos] = dict(
-    zip(QOS_PROFILE_NAMES, (SENSOR_DATA_QOS, DEFAULT_QOS, CLOCK_QOS), strict=True)
-)
-
-#: Cyclone DDS configuration that keeps all traffic on this machine's loopback interface: no
-#: multicast, discovery by unicast to 127.0.0.1. A rehearsal uses it so its /cmd_vel can never
-#: reach a robot on the network. Reliable writers send heartbeats every 5 ms instead of 100 ms,
-#: so a write is acknowledged within about a millisecond: the rehearsal robot waits for the
-#: node's acknowledgement of the obstacles each step, which took 74 ms (median) at the default.
-LOCALHOST_ONLY_CONFIG = """<CycloneDDS><Domain id="any">
-<General><Interfaces><NetworkInterface address="127.0.0.1"/></Interfaces>
-<AllowMulticast>false</AllowMulticast></General>
-<Discovery><ParticipantIndex>auto</ParticipantIndex><MaxAutoParticipantIndex>30</MaxAutoParticipantIndex>
-<Peers><Peer address="127.0.0.1"/></Peers></Discovery>
-<Internal><HeartbeatInterval min="1 ms" minsched="1 ms">5 ms</HeartbeatInterval></Internal>
-</Domain></CycloneDDS>"""
+from husky_sim.ros2.messages import MessageKit
+from husky_sim.ros2.settings import TRANSPORTS, Ros2Settings
 
 
-def topic_qos(settings: Ros2Settings, topic: str) -> Qos:
-    """The QoS of a topic by its setting's stem: `topic_qos(s, "odometry")` -> sensor data by default."""
-    return QOS_PROFILES[getattr(settings, f"{topic}_qos")]
+@dataclass(frozen=True)
+class Received:
+    """A message as it arrived, with its source timestamp (ns since the epoch, the sender's clock)."""
+
+    message: Any
+    sent_ns: int
 
 
-def dds_topic_name(ros_topic: str) -> str:
-    """`/cmd_vel` -> `rt/cmd_vel` (ROS 2 topics on DDS)."""
-    return "rt" + ros_topic
+class Subscription(Protocol):
+    def take(self) -> list[Received]:
+        """Every message waiting, oldest first."""
+
+    def publishers(self) -> int:
+        """How many publishers are matched (DDS discovery)."""
 
 
-#: Domains this process created with LOCALHOST_ONLY_CONFIG, by id.
-_CONFIGURED_DOMAINS: dict[int, Domain] = {}
+class Publisher(Protocol):
+    def write(self, message: Any) -> None: ...
+
+    def subscribers(self) -> int:
+        """How many subscriptions are matched (DDS discovery)."""
+
+    def wait_for_acks(self, timeout_s: float) -> bool:
+        """Block until reliable subscribers have acknowledged every message (or timeout_s)."""
 
 
-class Participant:
-    """One DDS participant and the topics, readers and writers made from it."""
+class Transport(Protocol):
+    settings: Ros2Settings  # as the transport resolved them (rclpy: from ROS parameters)
+    messages: MessageKit  # builds this transport's messages
 
-    def __init__(self, settings: Ros2Settings) -> None:
-        domain_id = settings.resolved_domain_id()
-        if settings.localhost_only and domain_id not in _CONFIGURED_DOMAINS:
-            # one configured Domain per id and process, kept for the process's life
-            _CONFIGURED_DOMAINS[domain_id] = Domain(domain_id, LOCALHOST_ONLY_CONFIG)
-        self.participant = DomainParticipant(domain_id)
-        self._topics: dict[str, Topic] = {}
+    def subscribe(self, topic: str, ros_type: str) -> Subscription:
+        """A subscription to the topic of setting `{topic}_topic`, with QoS `{topic}_qos`."""
 
-    def _topic(self, ros_topic: str, ros_type: str) -> Topic:
-        if ros_topic not in self._topics:
-            self._topics[ros_topic] = Topic(
-                self.participant, dds_topic_name(ros_topic), message_type(ros_type)
-            )
-        return self._topics[ros_topic]
+    def publish(self, topic: str, ros_type: str) -> Publisher:
+        """A publisher on the topic of setting `{topic}_topic`, with QoS `{topic}_qos`."""
 
-    def writer(self, ros_topic: str, ros_type: str, qos: Qos = DEFAULT_QOS) -> DataWriter:
-        return DataWriter(self.participant, self._topic(ros_topic, ros_type), qos=qos)
+    def subscribe_topic(self, ros_topic: str, ros_type: str, qos: str) -> Subscription:
+        """A subscription to any topic, with one of QOS_PROFILE_NAMES."""
 
-    def reader(self, ros_topic: str, ros_type: str, qos: Qos = DEFAULT_QOS) -> DataReader:
-        return DataReader(self.participant, self._topic(ros_topic, ros_type), qos=qos)
+    def publish_topic(self, ros_topic: str, ros_type: str, qos: str) -> Publisher:
+        """A publisher on any topic, with one of QOS_PROFILE_NAMES."""
+
+    def wait(self, timeout_s: float) -> None:
+        """Block until a message arrives on a subscription, or timeout_s (s) has passed."""
+
+    def close(self) -> None: ...
 
 
-def take_latest(reader: DataReader) -> Any | None:
-    """The newest valid sample waiting on a reader (older ones are dropped), or None."""
-    samples = take_all(reader)
-    return samples[-1] if samples else None
+class TopicsBySetting:
+    """`subscribe` and `publish` by a setting's stem, for a transport with `settings`,
+    `subscribe_topic` and `publish_topic`."""
+
+    settings: Ros2Settings
+
+    def subscribe(self, topic: str, ros_type: str) -> Subscription:
+        s = self.settings
+        return self.subscribe_topic(getattr(s, f"{topic}_topic"), ros_type, getattr(s, f"{topic}_qos"))
+
+    def publish(self, topic: str, ros_type: str) -> Publisher:
+        s = self.settings
+        return self.publish_topic(getattr(s, f"{topic}_topic"), ros_type, getattr(s, f"{topic}_qos"))
 
 
-def take_all(reader: DataReader) -> list[Any]:
-    """Every valid sample waiting on a reader, oldest first."""
-    return [
-        s for s in reader.take(N=256) if getattr(s, "sample_info", None) is None or s.sample_info.valid_data
-    ]
+def latest(received: Sequence[Received]) -> Received | None:
+    """The newest of some received messages, or None."""
+    return received[-1] if received else None
+
+
+def open_transport(
+    settings: Ros2Settings, kind: str = "cyclonedds", ros_args: Sequence[str] = ()
+) -> Transport:
+    """A transport of `kind` (settings.TRANSPORTS); `ros_args` (rclpy only) are ROS 2's command-line
+    arguments (`-p name:=value` sets a parameter, `-r __node:=name` renames the node)."""
+    if kind == "cyclonedds":
+        if ros_args:
+            raise ValueError("--ros-args: only the rclpy transport takes ROS arguments")
+        from husky_sim.ros2.cyclone_transport import CycloneTransport
+
+        return CycloneTransport(settings)
+    if kind == "rclpy":
+        from husky_sim.ros2.rclpy_transport import RclpyTransport
+
+        return RclpyTransport(settings, ros_args)
+    raise ValueError(f"transport: expected one of {', '.join(TRANSPORTS)}, got {kind[:40]!r}")

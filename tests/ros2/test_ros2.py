@@ -21,20 +21,15 @@ from mcap.reader import make_reader
 from controllers import SetPoint
 from husky_sim.cli import main
 from husky_sim.ros2 import messages as msg
+from husky_sim.ros2.cyclone_transport import DEFAULT_QOS, SENSOR_DATA_QOS, dds_topic_name, topic_qos
 from husky_sim.ros2.node import ControllerNode
 from husky_sim.ros2.rehearse import rehearse
-from husky_sim.ros2.settings import Ros2Settings, domain_id_from_env, lease_domain_id
-from husky_sim.ros2.transport import (
-    DEFAULT_QOS,
-    SENSOR_DATA_QOS,
-    Participant,
-    dds_topic_name,
-    take_all,
-    topic_qos,
-)
+from husky_sim.ros2.settings import TRANSPORTS, Ros2Settings, domain_id_from_env, lease_domain_id
+from husky_sim.ros2.transport import open_transport
 from husky_sim.runs.foxglove_record import MCAP_NAME, FoxgloveRecorder
 from husky_sim.runs.run import run_scenario
 from husky_sim.runs.scenario import load_scenario
+from tests.ros2.sample_messages import sample_messages
 
 pytestmark = pytest.mark.physics  # PyBullet or closed loops throughout (`make test-fast` skips)
 
@@ -69,41 +64,14 @@ def _to_rosbags(value: object, ros_type: str, store: object) -> object:
     return cls(**kwargs)
 
 
-def _sample_messages() -> dict[str, object]:
-    from controllers import Obstacle
-    from husky_sim.ros2.node import obstacles_to_markers
-
-    odom = msg.make(msg.ODOMETRY, header=msg.header(12.5, "odom"), child_frame_id="base_link")
-    odom.pose.pose = msg.pose(1.0, -2.0, 0.7)
-    odom.pose.covariance[0] = 0.01
-    odom.twist.twist.linear.x = 0.4
-    twist = msg.make(msg.TWIST)
-    twist.linear.x, twist.angular.z = 0.5, -0.25
-    poses = [
-        msg.make(msg.POSE_STAMPED, header=msg.header(3.0 + 0.1 * k, "odom"), pose=msg.pose(k, 0, 0.1 * k))
-        for k in range(3)
-    ]
-    path = msg.make(msg.PATH, header=msg.header(3.0, "odom"), poses=poses)
-    return {
-        msg.ODOMETRY: odom,
-        msg.TWIST: twist,
-        msg.PATH: path,
-        msg.POSE_STAMPED: msg.make(msg.POSE_STAMPED, header=msg.header(1.0, "map"), pose=msg.pose(3, 4, -1)),
-        msg.MARKER_ARRAY: obstacles_to_markers(
-            [Obstacle(2.0, 1.0, 0.45), Obstacle(-1.0, 0.5, 0.3)], 2.0, "odom"
-        ),
-        msg.CLOCK: msg.make(msg.CLOCK, clock=msg.to_time(7.25)),
-    }
-
-
-@pytest.mark.parametrize("ros_type", list(_sample_messages()))
+@pytest.mark.parametrize("ros_type", list(sample_messages()))
 def test_messages_serialise_exactly_as_ros2_cdr(ros_type: str) -> None:
     """Our DDS types, built from ROS 2's definitions, put on the wire byte for byte what ROS 2's
     CDR serializer (rosbags, a separate implementation) writes for the same message."""
     from rosbags.typesys import Stores, get_typestore
 
     store = get_typestore(Stores.ROS2_HUMBLE)
-    message = _sample_messages()[ros_type]
+    message = sample_messages()[ros_type]
     ours = message.serialize(use_version_2=False)
     theirs = bytes(store.serialize_cdr(_to_rosbags(message, ros_type, store), ros_type))
     assert ours == theirs
@@ -148,6 +116,12 @@ def test_serve_rejects_bad_input_in_one_line(capsys: pytest.CaptureFixture[str],
     assert "--solve-budget: must be at most tau = 0.2 s, got 0.5" in capsys.readouterr().err
     assert main(["rehearse", "husky_point_stabilisation", "--reply-timeout", "0"]) == 2
     assert "--reply-timeout: expected a number in [0.01, 600], got 0" in capsys.readouterr().err
+    assert main(["serve", "husky_point_stabilisation", "--ros-args", "-p", "plan_topic:=/p"]) == 2
+    assert "--ros-args: only the rclpy transport takes ROS arguments" in capsys.readouterr().err
+    assert main(["serve", "husky_point_stabilisation", "--node-name", "husky-cbf"]) == 2
+    assert "node_name: expected a ROS 2 node name like husky_sim_controller, got 'husky-cbf'" in (
+        capsys.readouterr().err
+    )
     monkeypatch.setenv("ROS_DOMAIN_ID", "999")
     assert main(["serve", "husky_point_stabilisation"]) == 2
     assert "ROS_DOMAIN_ID: expected an integer in [0, 232], got 999" in capsys.readouterr().err
@@ -155,14 +129,18 @@ def test_serve_rejects_bad_input_in_one_line(capsys: pytest.CaptureFixture[str],
 
 # -- the node's safety, over real DDS --------------------------------------------------------------
 class _Robot:
-    """The robot's side of the topics, in this process, on the node's (localhost) domain."""
+    """The robot's side of the topics, in this process, on the node's (localhost) domain, over
+    Cyclone DDS (a node on the rclpy transport talks to it through Fast DDS)."""
 
     def __init__(self, settings: Ros2Settings) -> None:
-        self.dds = Participant(settings)
-        self.odom = self.dds.writer(settings.odometry_topic, msg.ODOMETRY, topic_qos(settings, "odometry"))
-        self.goal = self.dds.writer(settings.goal_topic, msg.POSE_STAMPED, topic_qos(settings, "goal"))
-        self.cmd = self.dds.reader(settings.cmd_vel_topic, msg.TWIST, topic_qos(settings, "cmd_vel"))
-        self.plan = self.dds.reader(settings.plan_topic, msg.PATH, topic_qos(settings, "plan"))
+        self.dds = open_transport(settings)
+        self.odom = self.dds.publish("odometry", msg.ODOMETRY)
+        self.goal = self.dds.publish("goal", msg.POSE_STAMPED)
+        self.cmd = self.dds.subscribe("cmd_vel", msg.TWIST)
+        self.plan = self.dds.subscribe("plan", msg.PATH)
+
+    def received(self, subscription) -> list[object]:
+        return [r.message for r in subscription.take()]
 
     def send_odometry(self, x: float, y: float, yaw: float) -> None:
         odom = msg.make(msg.ODOMETRY, header=msg.header(time.time(), "odom"), child_frame_id="base_link")
@@ -176,15 +154,19 @@ class _Robot:
         while time.monotonic() < end:
             if odometry is not None:
                 self.send_odometry(*odometry)
-            got.extend(take_all(self.cmd))
+            got.extend(self.received(self.cmd))
             time.sleep(0.02)
-        return got + take_all(self.cmd)
+        return got + self.received(self.cmd)
 
 
-def _wait_matched(robot: _Robot) -> None:
+def _wait_matched(robot: _Robot, node: ControllerNode) -> None:
+    """Until both sides have matched the other (each middleware finishes discovery on its own)
+    and the node's commands reach the robot (it sends zeros without odometry): from Fast DDS to
+    Cyclone DDS the first samples come a second or two late, repaired by reliability."""
     end = time.monotonic() + 20
     while time.monotonic() < end:
-        if robot.odom.get_matched_subscriptions() and robot.cmd.get_matched_publications():
+        matched = robot.odom.subscribers() and robot.cmd.publishers() and node.connected()
+        if matched and robot.received(robot.cmd):
             return
         time.sleep(0.02)
     raise AssertionError("the node never appeared on DDS")
@@ -196,8 +178,16 @@ def husky_cbf():
     return sc, sc.with_overrides(horizon=5).make_controller("husky-cbf")
 
 
-def _start_node(controller, reference, tau_s: float, settings: Ros2Settings, out: Path, budget_s=None):
-    node = ControllerNode(controller, reference, tau_s, settings, out, budget_s)
+def _start_node(
+    controller,
+    reference,
+    tau_s: float,
+    settings: Ros2Settings,
+    out: Path,
+    budget_s=None,
+    transport="cyclonedds",
+):
+    node = ControllerNode(controller, reference, tau_s, settings, out, budget_s, transport)
     stop = threading.Event()
     thread = threading.Thread(target=node.spin, kwargs={"stop": stop.is_set}, daemon=True)
     thread.start()
@@ -205,22 +195,27 @@ def _start_node(controller, reference, tau_s: float, settings: Ros2Settings, out
 
 
 @pytest.mark.slow
-def test_node_commands_on_fresh_odometry_and_stops_the_robot_otherwise(husky_cbf, tmp_path: Path) -> None:
+@pytest.mark.parametrize("transport", TRANSPORTS)
+def test_node_commands_on_fresh_odometry_and_stops_the_robot_otherwise(
+    husky_cbf, tmp_path: Path, transport: str
+) -> None:
     """Wall clock: no odometry -> zero commands every tau; fresh odometry -> the controller's
     commands and plans; a goal in another frame is refused, one in odom retargets the node;
-    odometry gone for 2 tau -> zero again; on
-    shutdown a last zero command. Every event counted and in serve.csv."""
+    odometry gone for 2 tau -> zero again; on shutdown a last zero command. Every event counted
+    and in serve.csv. The same on both transports (rclpy's: Fast DDS to our Cyclone DDS robot)."""
     sc, controller = husky_cbf
     settings = Ros2Settings(domain_id=_domain(), localhost_only=True)
     robot = _Robot(settings)
-    node, stop, thread = _start_node(controller, sc.reference_object(), sc.tau_s, settings, tmp_path)
-    _wait_matched(robot)
+    node, stop, thread = _start_node(
+        controller, sc.reference_object(), sc.tau_s, settings, tmp_path, transport=transport
+    )
+    _wait_matched(robot, node)
     silent = robot.commands(1.0)
     assert len(silent) >= 3 and all(t.linear.x == 0 and t.angular.z == 0 for t in silent)
     start = (sc.robot.start.x_m, sc.robot.start.y_m, sc.robot.start.yaw_rad)
     driven = robot.commands(1.5, odometry=start)
     assert any(t.linear.x > 0.1 for t in driven), "fresh odometry must give a driving command"
-    plans = take_all(robot.plan)
+    plans = robot.received(robot.plan)
     assert plans and len(plans[-1].poses) == 6 and plans[-1].header.frame_id == "odom"
     # husky-cbf's plan starts where the drive acts on its first command: a dead time after the odometry
     stamps = [msg.from_time(p.header.stamp) - msg.from_time(plans[-1].header.stamp) for p in plans[-1].poses]
@@ -249,14 +244,17 @@ def test_node_commands_on_fresh_odometry_and_stops_the_robot_otherwise(husky_cbf
 
 
 @pytest.mark.slow
-def test_a_solve_longer_than_tau_sends_zero_not_its_plan(husky_cbf, tmp_path: Path) -> None:
+@pytest.mark.parametrize("transport", TRANSPORTS)
+def test_a_solve_longer_than_tau_sends_zero_not_its_plan(husky_cbf, tmp_path: Path, transport: str) -> None:
     """With a solve budget shorter than any solve (1 us), every result is late: each is dropped,
     a zero command sent and no plan published."""
     sc, controller = husky_cbf
     settings = Ros2Settings(domain_id=_domain(), localhost_only=True)
     robot = _Robot(settings)
-    node, stop, thread = _start_node(controller, sc.reference_object(), sc.tau_s, settings, tmp_path, 1e-6)
-    _wait_matched(robot)
+    node, stop, thread = _start_node(
+        controller, sc.reference_object(), sc.tau_s, settings, tmp_path, 1e-6, transport
+    )
+    _wait_matched(robot, node)
     start = (sc.robot.start.x_m, sc.robot.start.y_m, sc.robot.start.yaw_rad)
     got = robot.commands(1.0, odometry=start)
     stop.set()
@@ -264,7 +262,7 @@ def test_a_solve_longer_than_tau_sends_zero_not_its_plan(husky_cbf, tmp_path: Pa
     assert node.stats.events["overrun"] >= 3
     assert node.stats.events["command"] == 0
     assert got and all(t.linear.x == 0 and t.angular.z == 0 for t in got)
-    assert take_all(robot.plan) == []
+    assert robot.received(robot.plan) == []
 
 
 @pytest.mark.slow
@@ -318,15 +316,21 @@ def _mcap_messages(path: Path) -> tuple[dict[str, int], dict[str, list[bytes]]]:
 
 
 @pytest.mark.slow
-def test_rehearsal_over_dds_reaches_the_in_process_outcome(tmp_path: Path) -> None:
+@pytest.mark.parametrize(("transport", "stamped"), [("cyclonedds", False), ("rclpy", True)])
+def test_rehearsal_over_dds_reaches_the_in_process_outcome(
+    tmp_path: Path, transport: str, stamped: bool
+) -> None:
     """husky-cbf at N = 5 on husky_point_stabilisation (an obstacle beside the straight line, a
     goal 7 m away): the node in another process, every odometry, obstacle, goal, command and plan
     over DDS. The outcome is the in-process run's; and the robot's log equals, value for value,
     that of an in-process run whose controller sees the pose after the same message encoding,
     so the transport changes nothing but that rounding (about 1e-16 rad of yaw, which the closed
-    loop amplifies: the plain in-process run differs from step 12 on)."""
+    loop amplifies: the plain in-process run differs from step 12 on). The same with the node on
+    rclpy (Fast DDS) sending TwistStamped."""
     sc = load_scenario("husky_point_stabilisation").with_overrides(horizon=5)
-    rehearsed = rehearse(sc, "husky-cbf", tmp_path / "rehearsal", domain_id=_domain())
+    rehearsed = rehearse(
+        sc, "husky-cbf", tmp_path / "rehearsal", _domain(), transport=transport, cmd_vel_stamped=stamped
+    )
     direct = run_scenario(sc, "husky-cbf", out_dir=tmp_path / "direct").metrics
     transport = rehearsed["transport"]
     assert transport["node"]["overrun_events"] == 0, "machine too slow: a solve took longer than tau"

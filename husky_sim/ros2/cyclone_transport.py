@@ -1,0 +1,212 @@
+"""The Cyclone DDS transport: ROS 2's wire conventions from Python, with no ROS install.
+
+A ROS 2 topic `/cmd_vel` is the DDS topic `rt/cmd_vel`; samples are plain CDR (XCDR1), as ROS 2
+writes them. The QoS profiles are ROS 2's: `sensor_data` (best effort, keep last 5) for odometry,
+the default (reliable, keep last 10) for commands, goals, plans and obstacles, and the clock's
+(best effort, keep last 1).
+
+Two things make a ROS 2 node of it, as rmw does for its nodes:
+- **Type matching by name, for Fast DDS's endpoints.** Fast DDS (ROS 2's default middleware)
+  announces XTypes type information whose collection element flags leave "try construct" unset,
+  which the XTypes specification leaves undefined; Cyclone DDS rejects that type object, so for
+  every type with a sequence or an array (Odometry, Path, MarkerArray) the type hashes differ,
+  Cyclone cannot resolve Fast DDS's type and the endpoints never match. Cyclone's
+  `Compatibility/IgnoreTypeInformation` for eProsima's vendor id (1.15) matches those endpoints
+  by type name instead, as ROS 2's own Cyclone middleware does (it announces no type
+  information). Our types are ROS 2's definitions, checked byte for byte against ROS 2's
+  serializers (tests/ros2), so a name match is a type match.
+- **The ROS graph.** A ROS 2 node is what its participant announces on `ros_discovery_info`
+  (rmw_dds_common/ParticipantEntitiesInfo: the participant's gid, and per node its name and the
+  gids of its readers and writers); the transport announces its node there each time it adds a
+  reader or writer, so `ros2 node list` and rclpy's graph queries list it with its topics.
+"""
+
+from __future__ import annotations
+
+import os
+from typing import Any
+
+from cyclonedds.core import InstanceState, Policy, Qos, ReadCondition, SampleState, ViewState, WaitSet
+from cyclonedds.domain import Domain, DomainParticipant
+from cyclonedds.pub import DataWriter
+from cyclonedds.sub import DataReader
+from cyclonedds.topic import Topic
+from cyclonedds.util import duration
+
+from husky_sim.ros2 import messages as msg
+from husky_sim.ros2.settings import QOS_PROFILE_NAMES, Ros2Settings
+from husky_sim.ros2.transport import Received, TopicsBySetting
+
+_XCDR1 = Policy.DataRepresentation(use_cdrv0_representation=True)
+
+SENSOR_DATA_QOS = Qos(
+    Policy.Reliability.BestEffort,
+    Policy.History.KeepLast(5),
+    Policy.Durability.Volatile,
+    _XCDR1,
+)
+DEFAULT_QOS = Qos(
+    Policy.Reliability.Reliable(duration(milliseconds=100)),
+    Policy.History.KeepLast(10),
+    Policy.Durability.Volatile,
+    _XCDR1,
+)
+CLOCK_QOS = Qos(Policy.Reliability.BestEffort, Policy.History.KeepLast(1), Policy.Durability.Volatile, _XCDR1)
+#: The profiles a topic's QoS setting may name (ROS 2's names).
+QOS_PROFILES: dict[str, Qos] = dict(
+    zip(QOS_PROFILE_NAMES, (SENSOR_DATA_QOS, DEFAULT_QOS, CLOCK_QOS), strict=True)
+)
+#: rmw's QoS of ros_discovery_info: a late joiner gets each participant's last announcement.
+GRAPH_QOS = Qos(
+    Policy.Reliability.Reliable(duration(milliseconds=100)),
+    Policy.History.KeepLast(1),
+    Policy.Durability.TransientLocal,
+    _XCDR1,
+)
+GRAPH_TOPIC = "ros_discovery_info"
+#: A ROS 2 participant's user data: its security enclave (the root one).
+PARTICIPANT_USER_DATA = b"enclave=/;"
+
+#: Match Fast DDS's endpoints by type name (eProsima's vendor id 1.15; see the module docstring).
+COMPATIBILITY_CONFIG = (
+    '<CycloneDDS><Domain id="any"><Compatibility>'
+    "<IgnoreTypeInformation>1.15</IgnoreTypeInformation>"
+    "</Compatibility></Domain></CycloneDDS>"
+)
+
+#: Cyclone DDS configuration that keeps all traffic on this machine's loopback interface: no
+#: multicast, discovery by unicast to 127.0.0.1. A rehearsal uses it so its /cmd_vel can never
+#: reach a robot on the network. Reliable writers send heartbeats every 5 ms instead of 100 ms,
+#: so a write is acknowledged within about a millisecond: the rehearsal robot waits for the
+#: node's acknowledgement of the obstacles each step, which took 74 ms (median) at the default.
+LOCALHOST_ONLY_CONFIG = """<CycloneDDS><Domain id="any">
+<General><Interfaces><NetworkInterface address="127.0.0.1"/></Interfaces>
+<AllowMulticast>false</AllowMulticast></General>
+<Discovery><ParticipantIndex>auto</ParticipantIndex><MaxAutoParticipantIndex>30</MaxAutoParticipantIndex>
+<Peers><Peer address="127.0.0.1"/></Peers></Discovery>
+<Internal><HeartbeatInterval min="1 ms" minsched="1 ms">5 ms</HeartbeatInterval></Internal>
+</Domain></CycloneDDS>"""
+
+
+def topic_qos(settings: Ros2Settings, topic: str) -> Qos:
+    """The QoS of a topic by its setting's stem: `topic_qos(s, "odometry")` -> sensor data by default."""
+    return QOS_PROFILES[getattr(settings, f"{topic}_qos")]
+
+
+def dds_topic_name(ros_topic: str) -> str:
+    """`/cmd_vel` -> `rt/cmd_vel` (ROS 2 topics on DDS)."""
+    return "rt" + ros_topic
+
+
+def domain_config(localhost_only: bool, environ: dict[str, str] | None = None) -> str:
+    """Cyclone DDS's configuration for a domain: the user's (CYCLONEDDS_URI) first, then ours."""
+    user = (os.environ if environ is None else environ).get("CYCLONEDDS_URI", "").strip()
+    ours = [COMPATIBILITY_CONFIG, *([LOCALHOST_ONLY_CONFIG] if localhost_only else [])]
+    return ",".join([user, *ours] if user else ours)
+
+
+#: Domains this process configured, by id (one configuration per id and process, kept for the
+#: process's life: the first transport on a domain decides whether it is localhost-only).
+_CONFIGURED_DOMAINS: dict[int, Domain] = {}
+
+
+class _Subscription:
+    def __init__(self, reader: DataReader) -> None:
+        self.reader = reader
+
+    def take(self) -> list[Received]:
+        samples = self.reader.take(N=256)
+        return [
+            Received(s, s.sample_info.source_timestamp)
+            for s in samples
+            if getattr(s, "sample_info", None) is not None and s.sample_info.valid_data
+        ]
+
+    def publishers(self) -> int:
+        return len(self.reader.get_matched_publications())
+
+
+class _Publisher:
+    def __init__(self, writer: DataWriter) -> None:
+        self.writer = writer
+
+    def write(self, message: Any) -> None:
+        self.writer.write(message)
+
+    def subscribers(self) -> int:
+        return len(self.writer.get_matched_subscriptions())
+
+    def wait_for_acks(self, timeout_s: float) -> bool:
+        return bool(self.writer.wait_for_acks(duration(seconds=timeout_s)))
+
+
+class CycloneTransport(TopicsBySetting):
+    """One DDS participant: one ROS 2 node's topics, announced in the ROS graph."""
+
+    def __init__(self, settings: Ros2Settings) -> None:
+        self.settings = settings
+        self.messages = msg.cyclone_kit(settings.ros_distro)
+        domain_id = settings.resolved_domain_id()
+        if domain_id not in _CONFIGURED_DOMAINS:
+            _CONFIGURED_DOMAINS[domain_id] = Domain(domain_id, domain_config(settings.localhost_only))
+        self.participant = DomainParticipant(domain_id, qos=Qos(Policy.Userdata(PARTICIPANT_USER_DATA)))
+        self._topics: dict[str, Topic] = {}
+        self._readers: list[DataReader] = []
+        self._writers: list[DataWriter] = []
+        self._waitset = WaitSet(self.participant)
+        graph_type = msg.message_type(msg.PARTICIPANT_ENTITIES_INFO, settings.ros_distro)
+        self._graph = DataWriter(
+            self.participant, Topic(self.participant, GRAPH_TOPIC, graph_type), qos=GRAPH_QOS
+        )
+
+    def _topic(self, ros_topic: str, ros_type: str) -> Topic:
+        if ros_topic not in self._topics:
+            self._topics[ros_topic] = Topic(
+                self.participant,
+                dds_topic_name(ros_topic),
+                msg.message_type(ros_type, self.settings.ros_distro),
+            )
+        return self._topics[ros_topic]
+
+    def subscribe_topic(self, ros_topic: str, ros_type: str, qos: str) -> _Subscription:
+        reader = DataReader(self.participant, self._topic(ros_topic, ros_type), qos=QOS_PROFILES[qos])
+        self._waitset.attach(ReadCondition(reader, SampleState.NotRead | ViewState.Any | InstanceState.Any))
+        self._readers.append(reader)
+        self._announce()
+        return _Subscription(reader)
+
+    def publish_topic(self, ros_topic: str, ros_type: str, qos: str) -> _Publisher:
+        writer = DataWriter(self.participant, self._topic(ros_topic, ros_type), qos=QOS_PROFILES[qos])
+        self._writers.append(writer)
+        self._announce()
+        return _Publisher(writer)
+
+    def wait(self, timeout_s: float) -> None:
+        self._waitset.wait(duration(milliseconds=max(1, round(1000 * timeout_s))))
+
+    def close(self) -> None:
+        """Nothing to release by hand: Cyclone DDS deletes the entities with their Python objects."""
+
+    # -- the ROS graph ---------------------------------------------------------------------------
+    def _gid(self, entity: Any) -> Any:
+        """rmw_dds_common/Gid of a DDS entity: its GUID's 16 bytes (zero-padded to Humble's 24)."""
+        gid = self.messages.make("rmw_dds_common/msg/Gid")
+        raw = list(entity.guid.bytes)
+        gid.data = raw + [0] * (len(gid.data) - len(raw))
+        return gid
+
+    def _announce(self) -> None:
+        """Publish this participant's one node, its readers and writers, on ros_discovery_info."""
+        kit = self.messages
+        node = kit.make(
+            "rmw_dds_common/msg/NodeEntitiesInfo",
+            node_namespace="/",
+            node_name=self.settings.node_name,
+            reader_gid_seq=[self._gid(r) for r in self._readers],
+            writer_gid_seq=[self._gid(w) for w in self._writers],
+        )
+        self._graph.write(
+            kit.make(
+                msg.PARTICIPANT_ENTITIES_INFO, gid=self._gid(self.participant), node_entities_info_seq=[node]
+            )
+        )
