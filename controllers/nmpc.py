@@ -63,7 +63,7 @@ class NMPCController:
         self._repeats = RepeatedProblems() if self._backend.pure else None
         # the retries from the recovery guesses: FATROP alone on the structured backend. From these
         # guesses its IPOPT fallback solved none of 621 failed steps' problems (the suite, the
-        # claims report, the paper's gamma cells; README, "Solver retries") and took 4.4 s of the
+        # claims report, the paper's gamma cells; docs/solvers.md, "Solver retries") and took 4.4 s of the
         # suite's 70 s of CPU, up to 40 ms a guess inside a 100 ms control period
         self._retry_solve = (
             self._backend.solve_without_fallback

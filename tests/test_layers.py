@@ -1,5 +1,5 @@
 """The package layout is the architecture: each layer of husky_sim imports only the layers below
-it (README, Layout), and `controllers` never imports the simulator. Read from the source with
+it (docs/layout.md), and `controllers` never imports the simulator. Read from the source with
 `ast`, lazy imports inside functions included, so a shortcut across layers fails here."""
 
 import ast

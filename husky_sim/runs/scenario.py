@@ -89,7 +89,9 @@ def _real(lo: float, hi: float, unit: str = "", *, lo_open: bool = False) -> Any
             raise ValueError(allowed)
         return number
 
-    return Annotated[float, BeforeValidator(check)]
+    # the range also goes into the JSON schema, which the docs' scenario reference is made from
+    shown = Field(json_schema_extra={"range": _range_text(lo, hi, unit, lo_open)})
+    return Annotated[float, BeforeValidator(check), shown]
 
 
 #: The longest prediction horizon N (steps) a scenario, a command-line override or a check takes.
@@ -105,7 +107,8 @@ def _whole(lo: int, hi: int, unit: str = "") -> Any:
             raise ValueError(allowed)
         return value
 
-    return Annotated[int, BeforeValidator(check)]
+    shown = Field(json_schema_extra={"range": _range_text(lo, hi, unit, False)})  # for the docs
+    return Annotated[int, BeforeValidator(check), shown]
 
 
 def _name(value: object) -> str:

@@ -15,7 +15,7 @@ from husky_sim.sim.outcomes import Outcomes, final_outcome
 if TYPE_CHECKING:
     from husky_sim.sim.rollout import Rollout
 
-#: What each outcome word means, for people reading results (results.md, README).
+#: What each outcome word means, for people reading results (results.md, docs/index.md).
 OUTCOME_MEANINGS = {
     "reached": "the Husky held the goal (position and heading tolerances) for goal_hold_s: success",
     "tracking": "a tracking run that ran its full duration without collision; `converged` says whether "

@@ -79,7 +79,7 @@ def _wheel_definition(ros_type: str) -> tuple:
 def test_the_wheels_definitions_equal_humbles_on_the_wire_but_for_the_graphs_gid() -> None:
     """Each message, serialised by us (Humble's definitions), is read by rclpy's own typesupport
     (the installed distribution's) and written back to the same message: the wire formats agree.
-    Where the definitions differ, they differ as the README says: Marker's ARROW_STRIP constant
+    Where the definitions differ, they differ as docs/on_the_robot.md says: Marker's ARROW_STRIP constant
     (not on the wire), and the graph's Gid (Humble 24 bytes, later 16)."""
     from rosbags.typesys import Stores, get_typestore
 

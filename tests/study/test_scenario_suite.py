@@ -13,7 +13,7 @@ measured.
 
 The table is the paper's controllers reproduced with the paper's solver, IPOPT (the reference
 backend), so every cell runs on it; the default backend, FATROP, ends 9 to 11 of these knife-edge
-cells differently (README, "The scenario suite").
+cells differently (docs/scenarios.md, "The scenario suite").
 """
 
 from __future__ import annotations
