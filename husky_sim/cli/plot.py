@@ -10,7 +10,9 @@ from husky_sim.cli.common import UsageError, path_arg
 def cmd_plot(args: argparse.Namespace) -> int:
     from pathlib import Path
 
-    from husky_sim.viz.plots import RUN_FIGURES, plot_runs, plot_tuning_maps
+    from husky_sim.viz.comparison_figures import plot_runs
+    from husky_sim.viz.run_figures import RUN_FIGURES
+    from husky_sim.viz.tuning_maps import plot_tuning_maps
 
     if not args.run_dirs and not args.results:
         raise UsageError("plot: give one or more run directories, or --results results.csv")

@@ -210,7 +210,9 @@ def write_figures(
 def _scenario_figures(task: tuple[str, list[Path], Path, bool]) -> list[Path]:
     """One scenario's figures (write_figures): its comparison if it has runs, its tuning maps from
     results.csv (error rows included), and with `per_run` each run's own."""
-    from husky_sim.viz.plots import plot_comparison, plot_run, plot_tuning_maps
+    from husky_sim.viz.comparison_figures import plot_comparison
+    from husky_sim.viz.run_figures import plot_run
+    from husky_sim.viz.tuning_maps import plot_tuning_maps
 
     scenario, run_dirs, out_dir, per_run = task
     plots = out_dir / "plots"

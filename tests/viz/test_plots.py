@@ -25,28 +25,27 @@ from husky_sim.runs.run import run_scenario
 from husky_sim.runs.run_folder import read_results
 from husky_sim.runs.scenario import load_scenario
 from husky_sim.sim.trace import EpisodeTrace
-from husky_sim.viz.plots import (
+from husky_sim.viz.comparison_figures import comparison_figure, plot_comparison
+from husky_sim.viz.figure_base import (
     DPI,
-    NO_RUNS_TEXT,
-    OUTCOME_CATEGORIES,
-    RUN_FIGURES,
-    SAFE_CLEARANCE_M,
     PlotInputError,
     barrier_series,
     barrier_values,
-    clearance_colour,
-    clearance_missing_reason,
-    comparison_figure,
     load_run,
     moving_obstacles,
     obstacle_centres_at,
-    plot_comparison,
-    plot_run,
+)
+from husky_sim.viz.run_figures import RUN_FIGURES, plot_run, xy_figure
+from husky_sim.viz.tuning_maps import (
+    NO_RUNS_TEXT,
+    OUTCOME_CATEGORIES,
+    SAFE_CLEARANCE_M,
+    clearance_colour,
+    clearance_missing_reason,
     plot_tuning_maps,
     third_missing_reason,
     tuning_figure,
     tuning_grid,
-    xy_figure,
 )
 
 pytestmark = pytest.mark.physics  # PyBullet or closed loops throughout (`make test-fast` skips)
