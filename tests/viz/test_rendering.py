@@ -23,28 +23,27 @@ from husky_sim.runs.run_folder import summary_or_empty
 from husky_sim.runs.scenario import load_scenario, resolve
 from husky_sim.sim.step_log import compare_logs
 from husky_sim.viz.rendering import (
-    GOAL_DISC_RADIUS_M,
-    GOAL_DISC_THICKNESS_M,
     RenderError,
     RenderOptions,
     Scene,
-    annotate_frame,
-    camera_eye_m,
     camera_view,
-    draw_scale_bar,
-    frame_caption,
     frame_times,
-    ground_mask,
-    ground_pixels_per_m,
-    legend_entries,
-    legend_image,
     load_run_trace,
-    project_polyline,
     render_run,
     run_outcome,
-    scale_bar_length_m,
-    top_camera,
 )
+from husky_sim.viz.video_annotations import (
+    GOAL_DISC_RADIUS_M,
+    GOAL_DISC_THICKNESS_M,
+    annotate_frame,
+    draw_scale_bar,
+    frame_caption,
+    ground_mask,
+    legend_entries,
+    legend_image,
+    scale_bar_length_m,
+)
+from husky_sim.viz.video_cameras import camera_eye_m, ground_pixels_per_m, project_polyline, top_camera
 
 pytestmark = pytest.mark.physics  # PyBullet or closed loops throughout (`make test-fast` skips)
 
