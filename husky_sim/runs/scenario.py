@@ -1,5 +1,5 @@
-"""Scenario files: a validated YAML schema (pydantic) and its translation into a controller
-configuration, an episode configuration and a reference.
+"""Scenario files: a validated YAML schema (pydantic). What a scenario builds (a controller's
+configuration, an episode's, a reference) is husky_sim.runs.scenario_configs'.
 
 Every value carries its unit in its name and must be a finite number within a stated physical
 range (`_real` / `_whole` below say which); types are strict (no bool, string or sexagesimal
@@ -20,35 +20,28 @@ import json
 import math
 import re
 from pathlib import Path
-from typing import Annotated, Any, Literal
+from typing import TYPE_CHECKING, Annotated, Any, Literal
 
 import numpy as np
 from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, ValidationError, model_validator
 
-from controllers import (
-    CircleTrajectory,
-    Controller,
-    NMPCConfig,
-    NMPCController,
-    Reference,
-    SafetyConstraint,
-    SetPoint,
-    SolverOptions,
-)
-from controllers.husky_cbf import Footprint, HuskyCBFConfig, HuskyCBFController, RobotResponse
-from controllers.husky_cbf.config import PoseNoise
+from controllers import NMPCConfig, SafetyConstraint
 from husky_sim.paths import SCENARIO_DIR
 from husky_sim.scenario_file import ScenarioFileError, read_scenario_data
 from husky_sim.sim.drive import DriveConfig
 from husky_sim.sim.episode import EpisodeConfig
 from husky_sim.sim.geometry import load_geometry
-from husky_sim.sim.ground import DEFAULT_GROUND, DRIVE_TIME_BOUNDS_S, load_ground, with_friction
+from husky_sim.sim.ground import DEFAULT_GROUND, DRIVE_TIME_BOUNDS_S, load_ground
 from husky_sim.sim.kinematic import KinematicProblem
 from husky_sim.sim.outcomes import Outcomes
 from husky_sim.sim.sensing import SensingConfig
 from husky_sim.sim.world import ObstacleSpec, WorldConfig
 from husky_sim.sim.yaw_response import DEFAULT_FILE as YAW_RESPONSE_FILE
 from husky_sim.sim.yaw_response import GAIN_BOUNDS, TIME_CONSTANT_BOUNDS_S, YawResponse
+
+if TYPE_CHECKING:
+    from controllers import Controller, Reference
+    from controllers.husky_cbf import HuskyCBFConfig
 
 #: Most obstacles in one scenario (explicit plus random): each is a slot in the NLP, and solve
 #: time grows with them (7 obstacles: about 5 ms at N = 5; 1,000: 266 ms).
@@ -489,104 +482,40 @@ class Scenario(_Strict):
             data["seed"] = seed
         return scenario_from_data(data, "override")
 
+    # What the scenario builds lives in husky_sim.runs.scenario_configs (the schema stays apart)
     def kinematic_problem(
         self, robot_radius_m: float | None = None, allow_waypoints: bool = False
     ) -> KinematicProblem:
-        """This scenario for the kinematic loop (husky_sim.sim.kinematic), with the controller's
-        circle unless robot_radius_m (m) is given. An obstacle on waypoints has no constant-velocity
-        model (ValueError), unless `allow_waypoints`: then it moves on at its velocity at t = 0 (the
-        solve-time audit needs problems of the scenario's size, not its exact motion)."""
-        specs = self.obstacle_specs()
-        if not allow_waypoints and any(o.waypoints for o in specs):
-            raise ValueError(f"{self.name}: waypoint obstacles have no constant-velocity kinematic model")
-        start = self.robot.start
-        return KinematicProblem(
-            name=self.name,
-            start=(start.x_m, start.y_m, start.yaw_rad),
-            reference=self.reference_object(),
-            obstacles=tuple(spec.circle_at(0.0) for spec in specs),
-            robot_radius_m=self.robot.radius() if robot_radius_m is None else robot_radius_m,
-            duration_s=self.duration_s,
-        )
+        """This scenario for the kinematic loop (scenario_configs.kinematic_problem)."""
+        from husky_sim.runs import scenario_configs
+
+        return scenario_configs.kinematic_problem(self, robot_radius_m, allow_waypoints)
 
     def reference_object(self) -> Reference:
-        if self.reference.goal is not None:
-            g = self.reference.goal
-            return SetPoint(g.x_m, g.y_m, g.yaw_rad)
-        c = self.reference.circle
-        return CircleTrajectory(c.radius_m, c.angular_rate_radps, c.center_x_m, c.center_y_m, c.phase_rad)
+        from husky_sim.runs import scenario_configs
+
+        return scenario_configs.reference_object(self)
 
     def controller_config(self, safety: SafetyConstraint) -> NMPCConfig:
-        """The NMPC's configuration for this scenario with the obstacle constraint `safety` (N and
-        gamma are the file's: overrides are applied once, by `with_overrides`)."""
-        # ControllerSpec's fields are NMPCConfig's fields by name; `solver` names SolverOptions.backend
-        fields = self.controller.model_dump()
-        backend = fields.pop("solver")
-        if backend is not None:
-            fields["solver"] = SolverOptions(backend=backend)
-        return NMPCConfig(
-            **fields,
-            tau_s=self.tau_s,
-            safety=safety,
-            robot_radius_m=self.robot.radius(),
-            obstacle_slots=max(len(self.obstacle_specs()), 1),
-        )
+        from husky_sim.runs import scenario_configs
+
+        return scenario_configs.controller_config(self, safety)
 
     def husky_cbf_config(self) -> HuskyCBFConfig:
-        """husky-cbf's configuration: the file's NMPC settings (Relax-CBF), the drive's limits, the
-        robot's identified yaw response and the URDF's footprint."""
-        drive = self.drive.config()
-        yaw = self.robot.yaw_response_params()
-        geometry = load_geometry()
-        slots = min(max(len(self.obstacle_specs()), 1), HuskyCBFConfig.slots)
-        return HuskyCBFConfig(
-            nmpc=self.controller_config("relax-cbf"),
-            response=RobotResponse(
-                drive.max_linear_accel_mps2,
-                drive.max_angular_accel_radps2,
-                yaw.gain,
-                yaw.time_constant_s,
-                command_delay_s=yaw.delay_s,
-                half_separation_m=0.5 * geometry.track_width_m * drive.wheel_separation_multiplier,
-                max_linear_mps=drive.max_linear_mps,
-            ),
-            footprint=Footprint(*geometry.footprint_half_extents_m),
-            omega_cmd_max_radps=drive.max_angular_radps,
-            slots=slots,
-            # what a localisation would report about its own noise
-            pose_noise=PoseNoise(self.sensing.pose_xy_std_m, self.sensing.pose_yaw_std_rad),
-        )
+        from husky_sim.runs import scenario_configs
+
+        return scenario_configs.husky_cbf_config(self)
 
     def make_controller(self, name: str) -> Controller:
         """The controller called `name` (controllers.CONTROLLER_NAMES) configured for this scenario."""
-        if name == "husky-cbf":
-            return HuskyCBFController(self.husky_cbf_config())
-        return NMPCController(self.controller_config(name))
+        from husky_sim.runs import scenario_configs
+
+        return scenario_configs.make_controller(self, name)
 
     def episode_config(self) -> EpisodeConfig:
-        """Everything the PyBullet episode needs besides the controller and the reference."""
-        ground = with_friction(load_ground(self.ground), self.friction.ground)
-        if self.friction.lateral_stiffness_ratio is not None:
-            tyre = dataclasses.replace(
-                ground.tyre, lateral_stiffness_ratio=self.friction.lateral_stiffness_ratio
-            )
-            ground = dataclasses.replace(ground, tyre=tyre)
-        return EpisodeConfig(
-            start=(self.robot.start.x_m, self.robot.start.y_m, self.robot.start.yaw_rad),
-            tau_s=self.tau_s,
-            duration_s=self.duration_s,
-            world=WorldConfig(
-                physics_hz=self.physics_hz,
-                ground_friction=ground.tyre.friction,
-                obstacles=tuple(self.obstacle_specs()),
-            ),
-            drive=self.drive.config(),
-            ground=ground,
-            sensing=SensingConfig(**self.sensing.model_dump()),  # same field names
-            outcomes=Outcomes(**self.success.model_dump()),  # same field names
-            payload_kg=self.robot.payload_kg,
-            seed=self.seed,
-        )
+        from husky_sim.runs import scenario_configs
+
+        return scenario_configs.episode_config(self)
 
 
 def excerpt(value: object, limit: int = EXCERPT_CHARS) -> str:
