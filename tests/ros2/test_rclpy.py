@@ -249,7 +249,8 @@ def test_a_bad_ros_parameter_is_a_one_line_error(
 ) -> None:
     from husky_sim.cli import main
 
-    args = ["serve", "husky_point_stabilisation", "--transport", "rclpy", "--domain-id", str(_domain())]
+    args = ["serve", "husky_point_stabilisation", "--transport", "rclpy", "--localhost-only"]
+    args += ["--domain-id", str(_domain())]
     assert main([*args, "--out", str(tmp_path / "node"), "--ros-args", "-p", parameter]) == 2
     err = capsys.readouterr().err.strip()
     assert message in err and len(err.splitlines()) == 1
@@ -259,7 +260,7 @@ def test_ros_parameters_set_the_nodes_settings() -> None:
     """With rclpy the node's settings are ROS parameters: --ros-args override the defaults the
     command line gave, and the node takes the name it is remapped to."""
     transport = RclpyTransport(
-        Ros2Settings(domain_id=_domain(), cmd_vel_topic="/husky/cmd_vel"),
+        Ros2Settings(domain_id=_domain(), localhost_only=True, cmd_vel_topic="/husky/cmd_vel"),
         ["-p", "odometry_topic:=/odom", "-p", "cmd_vel_stamped:=true", "-p", "use_sim_time:=true",
          "-r", "__node:=husky_controller"],
     )  # fmt: skip
