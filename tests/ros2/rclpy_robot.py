@@ -51,7 +51,7 @@ def main() -> None:
     p.add_argument("--stamped", action="store_true")
     p.add_argument("--silent-from", type=float, default=math.inf, help="s: stop sending odometry then")
     p.add_argument("--silent-for", type=float, default=0.0)
-    p.add_argument("--graph-at", type=float, default=3.0, help="s: when to ask rclpy for the graph")
+    p.add_argument("--graph-at", type=float, default=6.0, help="s: when to ask rclpy for the graph")
     p.add_argument("--wait-for-node", type=float, default=60.0, help="s to wait for /cmd_vel's publisher")
     p.add_argument("--out", required=True)
     a = p.parse_args()
