@@ -116,17 +116,21 @@ class RclpyTransport(TopicsBySetting):
         except ImportError as exc:
             raise ValueError(
                 f"--transport rclpy: ROS 2's rclpy is not importable here ({exc}); source a ROS 2 "
-                "install, or `pip install -c constraints.txt ros-rclpy ros-rmw-fastrtps-cpp`"
+                'install, or `pip install -c constraints.txt -e ".[ros2]"`'
             ) from None
         if settings.localhost_only:  # ROS 2's own switch (Jazzy on): discovery on this machine only
             os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
         self._context = Context()
-        rclpy.init(
-            args=["husky-sim", "--ros-args", *ros_args] if ros_args else None,
-            context=self._context,
-            domain_id=settings.resolved_domain_id(),
-            signal_handler_options=SignalHandlerOptions.NO,
-        )
+        try:
+            rclpy.init(
+                args=["husky-sim", "--ros-args", *ros_args] if ros_args else None,
+                context=self._context,
+                domain_id=settings.resolved_domain_id(),
+                signal_handler_options=SignalHandlerOptions.NO,
+            )
+        except Exception as exc:  # rcl's argument parser: a malformed rule or an unknown argument
+            first = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+            raise ValueError(f"--ros-args: {first.split(', at /')[0][:160]}") from None
         try:
             overrides = [Parameter("use_sim_time", value=True)] if settings.use_sim_time else []
             self.node = Node(settings.node_name, context=self._context, parameter_overrides=overrides)

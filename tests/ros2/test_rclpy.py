@@ -238,20 +238,28 @@ def test_an_rclpy_robot_sees_an_overrunning_node_send_zero_and_no_plan(
 
 
 @pytest.mark.parametrize(
-    ("parameter", "message"),
+    ("ros_args", "message"),
     [
-        ("odometry_qos:=fast", "odometry_qos: expected one of sensor_data, default, clock, got 'fast'"),
-        ("odometry_qos:=5", "odometry_qos (ROS parameter): Trying to set parameter 'odometry_qos' to '5'"),
+        (
+            ["-p", "odometry_qos:=fast"],
+            "odometry_qos: expected one of sensor_data, default, clock, got 'fast'",
+        ),
+        (
+            ["-p", "odometry_qos:=5"],
+            "odometry_qos (ROS parameter): Trying to set parameter 'odometry_qos' to '5'",
+        ),
+        (["-p"], "--ros-args: failed to initialize rcl: Couldn't parse trailing -p flag"),
+        (["--bogus"], "--ros-args: ['--bogus']"),
     ],
 )
-def test_a_bad_ros_parameter_is_a_one_line_error(
-    capsys, tmp_path: Path, parameter: str, message: str
+def test_a_bad_ros_argument_is_a_one_line_error(
+    capsys, tmp_path: Path, ros_args: list[str], message: str
 ) -> None:
     from husky_sim.cli import main
 
     args = ["serve", "husky_point_stabilisation", "--transport", "rclpy", "--localhost-only"]
-    args += ["--domain-id", str(_domain())]
-    assert main([*args, "--out", str(tmp_path / "node"), "--ros-args", "-p", parameter]) == 2
+    args += ["--domain-id", str(_domain()), "--out", str(tmp_path / "node"), "--ros-args", *ros_args]
+    assert main(args) == 2
     err = capsys.readouterr().err.strip()
     assert message in err and len(err.splitlines()) == 1
 
