@@ -198,12 +198,12 @@ def cyclone_kit(distro: str = DEFAULT_DISTRO) -> MessageKit:
     return MessageKit(functools.partial(message_type, distro=distro))
 
 
-# The default distribution's kit, for code and tests that build messages without a transport.
-_DEFAULT = cyclone_kit()
+#: The default distribution's kit, for code and tests that build messages without a transport.
+DEFAULT_KIT = cyclone_kit()
 make, to_time, yaw_quaternion, pose, header = (
-    _DEFAULT.make,
-    _DEFAULT.to_time,
-    _DEFAULT.yaw_quaternion,
-    _DEFAULT.pose,
-    _DEFAULT.header,
+    DEFAULT_KIT.make,
+    DEFAULT_KIT.to_time,
+    DEFAULT_KIT.yaw_quaternion,
+    DEFAULT_KIT.pose,
+    DEFAULT_KIT.header,
 )

@@ -410,7 +410,7 @@ def obstacles_to_markers(
     """A MarkerArray of cylinders (one per obstacle, id = index, action ADD, which replaces the
     marker of the same id) that RViz and Foxglove draw and ObstacleTracker reads back; built with
     `kit` (default: our Cyclone DDS types)."""
-    kit = kit or msg.cyclone_kit()
+    kit = kit or msg.DEFAULT_KIT
     markers = []
     for i, o in enumerate(obstacles):
         m = kit.make(
