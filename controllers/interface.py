@@ -48,6 +48,9 @@ class ControlResult:
     #: when the plan starts after the measurement it was solved from (s): 0 for a plan from the
     #: measured pose; husky-cbf's starts where the drive acts on its first command (its dead time)
     plan_start_s: float = 0.0
+    #: the deadlock escape's phase this step ("" when none; husky-cbf's escape.py): the
+    #: controller found itself making no progress and follows a recovery waypoint
+    escape: str = ""
 
     @property
     def is_fallback(self) -> bool:

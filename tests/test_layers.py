@@ -14,7 +14,7 @@ ALLOWED = {
     "runs": {"sim"},
     "viz": {"sim", "runs"},
     "study": {"sim", "runs", "viz"},
-    "realcheck": {"sim", "runs"},
+    "realcheck": {"sim", "runs", "calibration"},  # a sample's steerability: drive-response's probe
     "bench": {"sim", "runs"},
     "ros2": {"sim", "runs"},
     "calibration": {"sim"},

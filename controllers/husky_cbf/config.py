@@ -10,7 +10,7 @@ the identified response in the scenario file, never from literals in code.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 
 from controllers.config import ConfigError, NMPCConfig
 
@@ -87,95 +87,171 @@ class Footprint:
 
 
 @dataclass(frozen=True)
+class Range:
+    """The values a setting may take: [lo, hi] ((lo, hi] when lo_open), in `unit`; a tuple
+    setting's every entry."""
+
+    lo: float
+    hi: float
+    unit: str = ""
+    lo_open: bool = False
+    integer: bool = False
+
+    def contains(self, value: float) -> bool:
+        if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
+            return False
+        if self.integer and not isinstance(value, int):
+            return False
+        return (value > self.lo if self.lo_open else value >= self.lo) and value <= self.hi
+
+    def text(self) -> str:
+        unit = f" {self.unit}" if self.unit else ""
+        return f"{'(' if self.lo_open else '['}{self.lo:g}, {self.hi:g}]{unit}"
+
+
+def setting(default: object, lo: float, hi: float, unit: str = "", *, lo_open: bool = False) -> object:
+    """A tunable setting: its default and its allowed range, checked when the config is made
+    (check_ranges) and shown by the scenario schema (`controller.husky_cbf`)."""
+    integer = isinstance(default, int) and not isinstance(default, bool)
+    return field(default=default, metadata={"range": Range(lo, hi, unit, lo_open, integer)})
+
+
+def check_ranges(config: object, prefix: str) -> None:
+    """ConfigError naming the first setting of `config` (a dataclass) outside its Range."""
+    for f in fields(config):
+        allowed = f.metadata.get("range")
+        if allowed is None:
+            continue
+        value = getattr(config, f.name)
+        values = value if isinstance(value, tuple) else (value,)
+        if not all(allowed.contains(v) for v in values):
+            raise ConfigError(f"{prefix}{f.name}: must be in {allowed.text()}, got {value}")
+
+
+@dataclass(frozen=True)
 class GuidanceConfig:
     """Waypoint guidance around blocked straight paths (controllers.husky_cbf.guidance)."""
 
-    grid_resolution_m: float = 0.1  # cost-grid cell size
-    grid_padding_m: float = 3.0  # grid extends this far beyond the robot and the goal
-    clearance_cost_m: float = 0.6  # cells closer than this to an inflated obstacle cost more ...
-    clearance_cost_gain: float = 4.0  # ... up to (1 + gain) times their length
-    lookahead_m: float = 1.5  # the waypoint: the farthest path point within this, in sight
-    mover_sweep_s: float = 2.0  # a mover blocks where it will be over the next seconds
-    release_margin_m: float = 0.1  # a guided robot leaves guidance only with this much to spare
+    grid_resolution_m: float = setting(0.1, 0.01, 1.0, "m")  # cost-grid cell size
+    #: a larger area is searched on a coarser grid: the search's time and memory grow with it
+    max_grid_cells: int = setting(200_000, 1_000, 5_000_000)
+    grid_padding_m: float = setting(3.0, 0.0, 20.0, "m", lo_open=True)  # beyond robot and goal
+    #: cells closer than clearance_cost_m (m) to an inflated obstacle cost more, up to
+    #: (1 + clearance_cost_gain) times their length: the path keeps its distance
+    clearance_cost_m: float = setting(0.6, 0.0, 5.0, "m", lo_open=True)
+    clearance_cost_gain: float = setting(4.0, 0.0, 100.0)
+    lookahead_m: float = setting(1.5, 0.0, 20.0, "m", lo_open=True)  # waypoint: farthest in sight
+    #: a waypoint's heading points along the path this many cells further on: one cell gives only
+    #: the grid's eight directions
+    path_heading_cells: int = setting(3, 1, 50)
+    mover_sweep_s: float = setting(2.0, 0.0, 20.0, "s")  # a mover blocks where it will be
+    release_margin_m: float = setting(0.1, 0.0, 2.0, "m")  # leave guidance only with this to spare
+    #: an obstacle slower than this counts as static (guidance's hysteresis; evasion ignores it):
+    #: the noise of a tracked obstacle's velocity estimate
+    static_speed_mps: float = setting(0.05, 0.0, 1.0, "m/s")
     #: among static obstacles, cells within path_hysteresis_width_m (m) of the last path cost this
     #: fraction less: with an obstacle dead ahead and a few cm of obstacle noise, the shortest way
     #: round changed sides from one step to the next and a loaded Husky, turning neither way,
     #: drove into it (check). Not among movers: there a mover crossing the path taken made the
     #: robot keep to it and touch the mover (paper_dynamic_tracking_crossing, N = 5)
-    path_hysteresis: float = 0.2
-    path_hysteresis_width_m: float = 0.2
+    path_hysteresis: float = setting(0.2, 0.0, 0.99)
+    path_hysteresis_width_m: float = setting(0.2, 0.0, 2.0, "m")
     #: Mover evasion (guidance.MoverEvasion): a mover whose track relative to the robot comes
     #: within its radius + the robot's inflation + evade_margin_m in the next evade_horizon_s
     #: makes the robot step aside now
-    evade_horizon_s: float = 6.0
-    evade_margin_m: float = 0.5
-    tracking_preview_s: float = 1.0  # tracking: the reference this far ahead is the path's goal
+    evade_horizon_s: float = setting(6.0, 0.0, 30.0, "s")
+    evade_margin_m: float = setting(0.5, 0.0, 5.0, "m")
+    #: a mover passing within this of dead ahead (m) is stepped round on the robot's left: a
+    #: fixed side, so sensing noise cannot flip it from step to step
+    evade_dead_ahead_m: float = setting(0.02, 0.0, 1.0, "m")
+    tracking_preview_s: float = setting(1.0, 0.0, 10.0, "s")  # tracking: the path's goal this far ahead
     #: Set-point approach (guidance.LineApproach): within approach_radius_m of the goal, a robot
-    #: off the goal's line (|lateral| > approach_exit_m) is led onto it
-    #: by a waypoint on the line approach_lookahead_m ahead of it, or, beside or past the goal by
-    #: more than approach_enter_m, behind it (it backs up onto the line, 1.5 lookaheads or 4 m
-    #: per m of lateral error behind the goal, and leaves only aligned
+    #: off the goal's line (|lateral| > approach_exit_m) is led onto it by a waypoint on the line
+    #: approach_lookahead_m ahead of it, or, beside or past the goal by more than
+    #: approach_enter_m, behind it (docking: it backs up onto the line and leaves only aligned
     #: within approach_exit_rad): a unicycle beside its goal cannot close the gap within a short
     #: horizon, and the skid-steer barely answers small turns.
-    approach_radius_m: float = 3.0
-    approach_lookahead_m: float = 1.0
-    approach_enter_m: float = 0.07
-    approach_exit_m: float = 0.03
-    approach_exit_rad: float = 0.05
-    approach_speed_mps: float = 0.6  # |v| cap within slow_radius_m of a set-point: time for the yaw lag
+    approach_radius_m: float = setting(3.0, 0.0, 20.0, "m", lo_open=True)
+    approach_lookahead_m: float = setting(1.0, 0.0, 10.0, "m", lo_open=True)
+    approach_enter_m: float = setting(0.07, 0.0, 2.0, "m", lo_open=True)
+    approach_exit_m: float = setting(0.03, 0.0, 2.0, "m", lo_open=True)
+    approach_exit_rad: float = setting(0.05, 0.0, math.pi, "rad", lo_open=True)
+    #: first a pre-goal this many approach lookaheads before the goal on its line, so that the
+    #: robot arrives straight; docking backs up at least as far behind the goal
+    pre_goal_lookaheads: float = setting(1.5, 0.0, 10.0, lo_open=True)
+    #: the pre-goal counts as reached within this (m): a robot that gets near it is lined up
+    #: well enough for the run-in, which the docking corrects
+    pre_goal_reached_m: float = setting(0.3, 0.0, 5.0, "m", lo_open=True)
+    #: docking backs up this far behind the goal per metre of lateral error (m/m): at the Husky's
+    #: yaw response a turn onto the line and a straight run-in need about four times the offset
+    docking_back_per_lateral: float = setting(4.0, 0.0, 20.0, lo_open=True)
+    #: ... and at most approach_radius_m less this (m), so that it stays within the approach
+    docking_radius_margin_m: float = setting(0.3, 0.0, 5.0, "m")
+    #: ... and drives in once it has backed up this fraction of the way: the last few per cent
+    #: of a back-up cost seconds at the approach speed's braking, and the run-in gains them back
+    docking_backed_up: float = setting(0.93, 0.0, 1.0, lo_open=True)
+    #: |v| cap within slow_radius_m of a set-point: time for the yaw lag
+    approach_speed_mps: float = setting(0.6, 0.0, 5.0, "m/s", lo_open=True)
     #: Pivot (guidance.LineApproach): within pivot_radius_m of a set-point and off its line, turn
     #: where it stands until aimed at the goal within pivot_aim_rad, drive to within
     #: pivot_arrive_m of it, and turn to its heading there; pivot again if it drifts beyond
-    #: pivot_restart_m (m, rad)
-    pivot_radius_m: float = 1.0
-    pivot_aim_rad: float = 0.2
-    pivot_arrive_m: float = 0.05
-    pivot_restart_m: float = 0.1
-    slow_radius_m: float = 1.5
+    #: pivot_restart_m (m, rad). Also wherever docking has no room behind the goal.
+    pivot_radius_m: float = setting(1.0, 0.0, 20.0, "m")
+    pivot_aim_rad: float = setting(0.2, 0.0, math.pi, "rad", lo_open=True)
+    pivot_arrive_m: float = setting(0.05, 0.0, 2.0, "m", lo_open=True)
+    pivot_restart_m: float = setting(0.1, 0.0, 2.0, "m", lo_open=True)
+    slow_radius_m: float = setting(1.5, 0.0, 20.0, "m", lo_open=True)
     #: a trajectory slower than this (m/s) will not come to the robot (the paper's dynamic
     #: tracking circle moves at 0.02 m/s): the robot drives at its point (guidance.point_approach)
     #: along the bearing beyond point_approach_far_m, turning to the reference's heading closer in,
     #: and tracks the reference itself within point_approach_near_m (m). Brought onto its tangent
     #: like onto a set-point's line instead, the Husky backed up metres to dock and rejoined 6.7
     #: to 9.3 s after a mover had passed (issue 10).
-    approach_max_reference_speed_mps: float = 0.1
-    point_approach_near_m: float = 0.1
-    point_approach_far_m: float = 0.3
+    approach_max_reference_speed_mps: float = setting(0.1, 0.0, 5.0, "m/s", lo_open=True)
+    point_approach_near_m: float = setting(0.1, 0.0, 5.0, "m", lo_open=True)
+    point_approach_far_m: float = setting(0.3, 0.0, 10.0, "m", lo_open=True)
 
     def __post_init__(self) -> None:
-        if not 0.0 <= self.path_hysteresis < 1.0:
-            raise ConfigError(f"guidance.path_hysteresis: must be in [0, 1), got {self.path_hysteresis}")
-        for name in (
-            "grid_resolution_m",
-            "grid_padding_m",
-            "clearance_cost_m",
-            "lookahead_m",
-            "approach_radius_m",
-            "approach_lookahead_m",
-            "approach_enter_m",
-            "approach_exit_m",
-            "approach_exit_rad",
-            "approach_speed_mps",
-            "pivot_aim_rad",
-            "pivot_arrive_m",
-            "pivot_restart_m",
-            "slow_radius_m",
-            "approach_max_reference_speed_mps",
-            "point_approach_near_m",
-            "point_approach_far_m",
-        ):
-            _positive(f"guidance.{name}", getattr(self, name))
-        for name in (
-            "clearance_cost_gain",
-            "path_hysteresis_width_m",
-            "pivot_radius_m",
-            "mover_sweep_s",
-            "release_margin_m",
-            "tracking_preview_s",
-            "evade_horizon_s",
-            "evade_margin_m",
-        ):
-            _non_negative(f"guidance.{name}", getattr(self, name))
+        check_ranges(self, "guidance.")
+
+
+@dataclass(frozen=True)
+class EscapeConfig:
+    """Deadlock escape (controllers.husky_cbf.escape): Nav2's progress checker and recovery
+    behaviours, sized for a Husky and the suite's scenarios."""
+
+    #: stalled: over this window (s) the robot came less than progress_min_m (m) closer to its
+    #: target and moved less than that. Nav2's SimpleProgressChecker asks for 0.5 m in 10 s; a
+    #: Husky at its 0.4 to 1 m/s cruise covers 0.25 m in well under a second, so 3 s of less is
+    #: no longer a slow manoeuvre but one that leads nowhere
+    progress_window_s: float = setting(3.0, 0.0, 60.0, "s", lo_open=True)
+    progress_min_m: float = setting(0.25, 0.0, 5.0, "m", lo_open=True)
+    #: ... or its commands were idle (below idle_speed_mps and idle_yaw_rate_radps, the suite's
+    #: stuck thresholds) for idle_s (s): a robot told to stand still away from its target waits
+    #: for nothing it can see within its horizon
+    idle_s: float = setting(0.5, 0.0, 60.0, "s", lo_open=True)
+    idle_speed_mps: float = setting(0.05, 0.0, 1.0, "m/s", lo_open=True)
+    idle_yaw_rate_radps: float = setting(0.05, 0.0, 1.0, "rad/s", lo_open=True)
+    #: within this of the target (m) the set-point approach (docking, pivot) owns the robot
+    near_m: float = setting(0.3, 0.0, 5.0, "m")
+    aim_rad: float = setting(0.35, 0.0, math.pi, "rad", lo_open=True)  # turn first beyond this
+    drive_m: float = setting(1.0, 0.0, 10.0, "m", lo_open=True)  # then along the way: past one obstacle
+    arrive_m: float = setting(0.15, 0.0, 2.0, "m", lo_open=True)  # a phase's point is reached within
+    back_up_m: float = setting(0.5, 0.0, 5.0, "m")  # a pinned robot backs up this far: room to turn
+    phase_timeout_s: float = setting(5.0, 0.0, 60.0, "s", lo_open=True)  # a phase ends after this
+    #: a stall within memory_radius_m (m) of an earlier one in the last tabu_s (s) is a repeat:
+    #: that spot becomes a virtual obstacle of tabu_radius_m (m) for guidance for tabu_s
+    memory_radius_m: float = setting(0.6, 0.0, 10.0, "m", lo_open=True)
+    tabu_radius_m: float = setting(0.5, 0.0, 5.0, "m")
+    tabu_s: float = setting(20.0, 0.0, 600.0, "s", lo_open=True)
+    enabled: bool = True
+    #: on trajectories too? No: a tracking robot's progress is its reference's, and one that waits
+    #: while its reference passes through an obstacle is not stalled. Tried on the crossing movers
+    #: (paper_dynamic_tracking_crossing, N = 5): backing out of the wait, the robot met a mover
+    on_trajectories: bool = False
+
+    def __post_init__(self) -> None:
+        check_ranges(self, "escape.")
 
 
 @dataclass(frozen=True)
@@ -192,28 +268,29 @@ class HuskyCBFConfig:
     #: far less (1 m/s and 0.93 rad/s, wheels at 1.5 and 0.5 m/s: 0.16 rad/s, a yaw ratio of
     #: 0.11, `husky-sim drive-response`), and 1.5x (the uncalibrated plant's setting) made the
     #: robot plan turns it could not make and touch obstacles on the circle scenarios
-    wheel_speed_ratio: float = 1.0
+    wheel_speed_ratio: float = setting(1.0, 0.0, 3.0, lo_open=True)
     #: margin (m) between each body disc and an obstacle: sensing noise and the drive's
     #: tracking error; braking distance is in the model, so this need not cover it.
-    margin_m: float = 0.1
+    margin_m: float = setting(0.1, 0.0, 2.0, "m")
     #: a mover's circle grows by this much per metre of its predicted travel (m/m): its velocity
     #: is an estimate, and a person does not walk a straight line.
-    mover_margin_per_m: float = 0.3
+    mover_margin_per_m: float = setting(0.3, 0.0, 5.0, "m/m")
     #: a mover at a predicted step blocks its whole track over the next this many seconds (s):
     #: the time a skid-steer needs to turn away (yaw lag) and brake
-    mover_sweep_s: float = 1.5
+    mover_sweep_s: float = setting(1.5, 0.0, 10.0, "s")
     #: disc count: the fewest discs along the body whose radius exceeds the half width by at most
     #: this (m); 3 for a Husky (radius 0.38 m, against 0.57 m for one enclosing circle).
-    disc_excess_m: float = 0.05
-    accel_weight: tuple[float, float] = (0.2, 0.05)  # cost on (dv/dt, d omega_cmd/dt) squared
+    disc_excess_m: float = setting(0.05, 0.01, 1.0, "m")
+    #: cost on (dv/dt, d omega_cmd/dt) squared: smooth commands a drive can follow
+    accel_weight: tuple[float, float] = setting((0.2, 0.05), 0.0, 1e6)
     #: terminal cost in the reference's frame (along, across, heading): a heavy lateral weight,
     #: so that a short horizon does not settle beside its goal (a unicycle beside its goal lowers
     #: a stage cost only by backing up and turning).
-    terminal_weight: tuple[float, float, float] = (20.0, 200.0, 5.0)
+    terminal_weight: tuple[float, float, float] = setting((20.0, 200.0, 5.0), 0.0, 1e6)
     #: the terminal lateral error is taken this far ahead of the robot (behind it while it backs
     #: up onto a goal's line), so that turning toward the line pays within a short horizon (m)
-    terminal_lookahead_m: float = 0.5
-    terminal_speed_weight: float = 5.0  # set-points: arrive at rest ((m/s)^-2 in the cost)
+    terminal_lookahead_m: float = setting(0.5, 0.0, 5.0, "m")
+    terminal_speed_weight: float = setting(5.0, 0.0, 1e6)  # set-points: arrive at rest ((m/s)^-2 in the cost)
     #: the localisation's reported pose noise: the set-point approach decides on a filtered pose
     #: (localisation.PoseFilter); none declared, the measured pose as it is
     pose_noise: PoseNoise = field(default_factory=PoseNoise)
@@ -221,13 +298,18 @@ class HuskyCBFConfig:
     #: predicted at least weak_turn_min_rad of heading change, a robot on its way to a set-point
     #: that turned less than weak_turn_ratio of it is held to weak_turn_speed_mps (m/s): it may
     #: not steer round what its plan goes round, and must be able to stop before it
-    weak_turn_window_s: float = 1.6
-    weak_turn_min_rad: float = 0.3
-    weak_turn_ratio: float = 0.4
-    weak_turn_speed_mps: float = 0.4
-    soft_penalty: float = 1e4  # exact-penalty weight on the obstacle slack of the re-solve
-    slots: int = 6  # nearest obstacles in the NLP
+    weak_turn_window_s: float = setting(1.6, 0.0, 10.0, "s", lo_open=True)
+    weak_turn_min_rad: float = setting(0.3, 0.0, 2 * math.pi, "rad", lo_open=True)
+    weak_turn_ratio: float = setting(0.4, 0.0, 1.0)
+    weak_turn_speed_mps: float = setting(0.4, 0.0, 5.0, "m/s", lo_open=True)
+    #: exact-penalty weight on the obstacle slack of the re-solve: large enough that a feasible
+    #: hard plan is the penalised problem's optimum
+    soft_penalty: float = setting(1e4, 0.0, 1e9, lo_open=True)
+    #: the nearest obstacles in the NLP (at most; fewer when the scenario has fewer): each slot
+    #: adds a constraint per body disc and step to the OCP
+    slots: int = setting(6, 1, 64)
     guidance: GuidanceConfig = field(default_factory=GuidanceConfig)
+    escape: EscapeConfig = field(default_factory=EscapeConfig)
 
     @property
     def tau_s(self) -> float:
@@ -243,24 +325,6 @@ class HuskyCBFConfig:
         if self.nmpc.safety != "relax-cbf":
             raise ConfigError(f"nmpc.safety: husky-cbf is built on relax-cbf, got {self.nmpc.safety!r}")
         _positive("omega_cmd_max_radps", self.omega_cmd_max_radps)
-        _positive("wheel_speed_ratio", self.wheel_speed_ratio)
-        for name in (
-            "margin_m",
-            "mover_margin_per_m",
-            "mover_sweep_s",
-            "disc_excess_m",
-            "terminal_speed_weight",
-            "terminal_lookahead_m",
-        ):
-            _non_negative(name, getattr(self, name))
-        _positive("soft_penalty", self.soft_penalty)
-        for name in ("weak_turn_window_s", "weak_turn_min_rad", "weak_turn_speed_mps"):
-            _positive(name, getattr(self, name))
-        if not 0.0 <= self.weak_turn_ratio <= 1.0:
-            raise ConfigError(f"weak_turn_ratio: must be in [0, 1], got {self.weak_turn_ratio}")
-        if len(self.accel_weight) != 2 or min(self.accel_weight) < 0:
-            raise ConfigError(f"accel_weight: two weights >= 0, got {self.accel_weight}")
-        if len(self.terminal_weight) != 3 or min(self.terminal_weight) < 0:
-            raise ConfigError(f"terminal_weight: three weights >= 0, got {self.terminal_weight}")
-        if not 1 <= self.slots <= 64:
-            raise ConfigError(f"slots: must be in [1, 64], got {self.slots}")
+        if len(self.accel_weight) != 2 or len(self.terminal_weight) != 3:
+            raise ConfigError("accel_weight, terminal_weight: two and three weights")
+        check_ranges(self, "")

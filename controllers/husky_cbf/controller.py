@@ -6,8 +6,9 @@ Per control step:
    dead time from the measured pose and the estimated yaw rate (the model's prediction corrected
    by the measured heading change) under the commands already sent, and the last command;
 2. the reference: the paper's, unless guidance (guidance.py) gives a waypoint: out of the way of a
-   mover on a collision course, onto a set-point's line near the goal (straight at the point of
-   a slow trajectory), or along a shortest path when the straight way is blocked;
+   mover on a collision course, out of a deadlock (escape.py: the robot made no progress towards
+   its target), onto a set-point's line near the goal (straight at the point of a slow
+   trajectory), or along a shortest path when the straight way is blocked;
 3. the nearest obstacles predicted at constant velocity, each inflated by the margin; a mover
    covers its next mover_sweep_s of travel at every step, with a margin growing with that travel;
 4. the hard OCP (ocp.py); if IPOPT fails, the same OCP with an exactly penalised obstacle slack
@@ -27,11 +28,13 @@ import numpy as np
 from controllers.backends import FatropSolver, IpoptSolver, RawSolution
 from controllers.husky_cbf.config import HuskyCBFConfig
 from controllers.husky_cbf.delay import CommandPipe
+from controllers.husky_cbf.escape import Escape
 from controllers.husky_cbf.footprint import disc_cover
 from controllers.husky_cbf.guidance import (
     Guidance,
     LineApproach,
     MoverEvasion,
+    Waypoint,
     inflated_circles,
     point_approach,
 )
@@ -69,6 +72,7 @@ class HuskyCBFController:
         self._guidance = Guidance(config.guidance, self._disc_radius + config.margin_m)
         self._approach = LineApproach(config.guidance)
         self._evasion = MoverEvasion(config.guidance, self._disc_radius + config.margin_m)
+        self._escape = Escape(config.escape, base.tau_s, self._disc_radius + config.margin_m)
         self._step = extended_step(base.tau_s, config.response)
         self._pipe = CommandPipe(config.response, base.tau_s)
         self._pose_filter = PoseFilter(config.pose_noise, base.tau_s)
@@ -85,6 +89,7 @@ class HuskyCBFController:
 
     def reset(self) -> None:
         self._plan: ExtendedPlan | None = None
+        self._set_point = True  # whether this step's reference is a set-point
         self._pipe.reset()
         self._omega_body = 0.0  # body yaw rate predicted for now (rad/s)
         self._predicted_turn = 0.0  # heading change predicted over the last control step (rad)
@@ -93,6 +98,7 @@ class HuskyCBFController:
         self._guidance.reset()
         self._approach.reset()
         self._evasion.reset()
+        self._escape.reset()
         self._pose_filter.reset()
         self._turns.reset()
         self._hard.reset()
@@ -134,10 +140,14 @@ class HuskyCBFController:
         goal = (
             ref_states[-1] if isinstance(reference, SetPoint) else self._tracking_goal(reference, circles, t)
         )
-        # where to go now, in priority: out of a mover's way, onto a set-point's line (or at a
-        # slow trajectory's point), the goal
+        # where to go now, in priority: out of a mover's way, out of a deadlock, onto a
+        # set-point's line (or at a slow trajectory's point), the goal
         slow_trajectory = stationary and not isinstance(reference, SetPoint)
         target = self._evasion.waypoint(pose, 0.0 if slow_trajectory else speed_mps, obstacles)
+        escape = self._escape_waypoint(pose, goal, target is not None, circles, obstacles, t)
+        if escape is not None:
+            target = [escape.x_m, escape.y_m, escape.heading_rad]
+            return np.tile(target, (base.horizon + 1, 1)), np.zeros((base.horizon, 2)), True
         if target is None and slow_trajectory:
             g = cfg.guidance
             target = point_approach(pose, goal, g.point_approach_near_m, g.point_approach_far_m)
@@ -145,11 +155,35 @@ class HuskyCBFController:
             target = self._approach.waypoint(estimate, goal, circles)
         if target is not None:
             goal = np.array([target.x_m, target.y_m, target.heading_rad])
-        waypoint = self._guidance.waypoint(pose[:2], goal, obstacles) or target
+        tabu = self._escape.tabu_circles(t)
+        waypoint = self._guidance.waypoint(pose[:2], goal, obstacles, tabu) or target
         if waypoint is None:
             return ref_states, ref_controls, False
         target = [waypoint.x_m, waypoint.y_m, waypoint.heading_rad]
         return np.tile(target, (base.horizon + 1, 1)), np.zeros((base.horizon, 2)), True
+
+    def _escape_waypoint(
+        self,
+        pose: np.ndarray,
+        goal: np.ndarray,
+        evading: bool,
+        circles: np.ndarray,
+        obstacles: Sequence[Obstacle],
+        t: float,
+    ) -> Waypoint | None:
+        """The deadlock escape's waypoint (escape.py), or None. Not while stepping aside from a
+        mover: that robot leaves its way on purpose."""
+        escape = self.config.escape
+        if not escape.enabled or not (escape.on_trajectories or self._set_point):
+            return None
+        if evading:
+            self._escape.pause()
+            return None
+
+        def plan(xy: np.ndarray, goal_xy: np.ndarray, extra: np.ndarray) -> np.ndarray | None:
+            return self._guidance.plan_path(xy, goal_xy, obstacles, extra)
+
+        return self._escape.waypoint(pose, goal, self._pipe.current, circles, plan, t)
 
     def _tracking_goal(self, reference: Reference, circles: np.ndarray, t: float) -> np.ndarray:
         """The reference a preview ahead, or the first later one outside every inflated obstacle
@@ -276,6 +310,7 @@ class HuskyCBFController:
             return self._brake(
                 np.full(3, np.nan), n_real, len(obstacles) - n_real, start, "invalid state", False
             )
+        self._set_point = isinstance(reference, SetPoint)
         turn = self._measured_turn(pose)
         estimate = self._pose_filter.update(pose, self._predicted_speed, self._predicted_turn / base.tau_s)
         if turn is not None:
@@ -289,7 +324,8 @@ class HuskyCBFController:
             pose, estimate, float(z0[3]), reference, sampled, stationary, obstacles, t
         )
         centres, radii = self._obstacles(pose, obstacles, self._pipe.delay_s)
-        lookahead = cfg.terminal_lookahead_m * (-1.0 if self._approach.reversing else 1.0)
+        reversing = self._approach.reversing or self._escape.reversing
+        lookahead = cfg.terminal_lookahead_m * (-1.0 if reversing else 1.0)
         caps = self._speed_caps(z0, now, stationary, isinstance(reference, SetPoint), self._evasion.active)
         p = pack_parameters(z0, ref_states, ref_controls, centres, radii, caps, lookahead)
         guess = self._warm_guess(z0)
@@ -350,6 +386,7 @@ class HuskyCBFController:
             solver=raw.solver,
             solver_fallback="; ".join(dict.fromkeys(self._solver_fallbacks)),
             plan_start_s=self._pipe.delay_s,
+            escape=self._escape.phase,
         )
 
     def _barriers(self, plan: ExtendedPlan, p: np.ndarray, layout: Layout, n_real: int) -> np.ndarray:
@@ -379,4 +416,5 @@ class HuskyCBFController:
             self._yaw_prev = None
         result = ControlResult.brake(n, n_real, ignored, time.perf_counter() - start, status, guided)
         result.solver_fallback = "; ".join(dict.fromkeys(self._solver_fallbacks))
+        result.escape = self._escape.phase
         return result

@@ -29,6 +29,7 @@ import numpy as np
 
 from controllers import CONTROLLER_NAMES
 from husky_sim.realcheck.audit import AuditThresholds, Finding, audit, measure_solve_times
+from husky_sim.realcheck.steerability import CAN_PIVOT_RADPS, failure_class
 from husky_sim.realcheck.sweep import (
     Perturbation,
     PerturbationRanges,
@@ -45,6 +46,7 @@ from husky_sim.scenario_file import scenario_yaml
 PERCENTILES = (0, 5, 25, 50, 75, 95, 100)
 #: Rows of the per-sample table in check.md (check.json always has every sample).
 MD_SAMPLE_ROWS = 200
+PAYLOAD_BINS = 5  # bars of the pass-rate-by-payload figure
 
 
 @dataclass(frozen=True)
@@ -121,6 +123,11 @@ def sweep_stats(results: Sequence[dict[str, Any]]) -> dict[str, Any]:
         "pass_rate": passed / len(results),
         "collided": sum(bool(r["collided"]) for r in results),
         "outcomes": dict(sorted(Counter(r["outcome"] for r in results).items())),
+        # failed samples by what failed: the plant (its robot cannot pivot, steerability) or
+        # the controller
+        "failures_by_class": dict(
+            sorted(Counter(failure_class(r["steerability"]) for r in results if not r["passed"]).items())
+        ),
         "clearance_percentiles_m": None,
         "worst_clearance_m": None,
         "worst_sample": None,
@@ -309,7 +316,46 @@ def write_plots(report: CheckReport, out_dir: Path) -> dict[str, str]:
             ax.set_ylabel("min clearance (m)")
     fig.suptitle("minimum clearance against each perturbation (red: failing samples)")
     fig.savefig(out_dir / "sensitivity.png", dpi=90)
-    return {"histogram": "clearance_hist.png", "sensitivity": "sensitivity.png"}
+    _payload_figure(report, out_dir / "pass_rate_by_payload.png")
+    return {
+        "histogram": "clearance_hist.png",
+        "sensitivity": "sensitivity.png",
+        "payload": "pass_rate_by_payload.png",
+    }
+
+
+def _payload_figure(report: CheckReport, path: Path) -> None:
+    """Pass rate per payload bin (bars, with the samples in each), and each sample's turn in place
+    from its steerability probe against its payload (green passed, red failed)."""
+    from matplotlib.figure import Figure
+
+    payload = np.array([p.payload_kg for p in report.perturbations])
+    passed = np.array([bool(r["passed"]) for r in report.results])
+    turn = np.array([r["steerability"]["turn_in_place_radps"] for r in report.results], dtype=float)
+    lo, hi = report.ranges.payload_kg
+    edges = np.linspace(lo, hi if hi > lo else lo + 1.0, PAYLOAD_BINS + 1)
+    bins = np.clip(np.digitize(payload, edges) - 1, 0, PAYLOAD_BINS - 1)
+    fig = Figure(figsize=(9.6, 3.6), layout="constrained")
+    ax, ax2 = fig.add_subplot(1, 2, 1), fig.add_subplot(1, 2, 2)
+    for b in range(PAYLOAD_BINS):
+        members = bins == b
+        if members.any():
+            rate = float(np.mean(passed[members]))
+            ax.bar(0.5 * (edges[b] + edges[b + 1]), rate, width=0.9 * (edges[1] - edges[0]), color="tab:blue")
+            ax.text(0.5 * (edges[b] + edges[b + 1]), rate, f"{members.sum()}", ha="center", va="bottom")
+    ax.axhline(report.stats["pass_rate"], color="k", lw=0.8, ls="--", label="all samples")
+    ax.set_ylim(0.0, 1.1)
+    ax.set_xlabel("payload (kg)")
+    ax.set_ylabel("pass rate (samples per bar above it)")
+    ax.legend()
+    ax2.scatter(payload[passed], turn[passed], s=14, c="tab:green", label="passed")
+    ax2.scatter(payload[~passed], turn[~passed], s=18, c="tab:red", marker="x", label="failed")
+    ax2.axhline(CAN_PIVOT_RADPS, color="k", lw=0.8, ls="--", label="can pivot")
+    ax2.set_xlabel("payload (kg)")
+    ax2.set_ylabel("yaw rate turning in place (rad/s of 1)")
+    ax2.legend()
+    fig.suptitle(f"{report.scenario} {report.controller}: pass rate and steerability by payload")
+    fig.savefig(path, dpi=90)
 
 
 def _cell(text: str) -> str:
@@ -322,11 +368,15 @@ def _num(value: float | None, fmt: str = ".3f") -> str:
 
 
 def _sample_row(r: dict[str, Any], p: Perturbation) -> str:
+    steer = r["steerability"]
+    failed = "" if r["passed"] else f" ({failure_class(steer)})"
     return (
-        f"| {p.index} | {r['outcome']} | {'yes' if r['passed'] else 'no'} | {_num(r['min_clearance_m'])} | "
-        f"{p.ground_friction:.2f} | {p.payload_kg:.1f} | {p.latency_steps} | {p.pose_xy_std_m:.3f} | "
-        f"{p.pose_yaw_std_rad:.3f} | {p.obstacle_xy_std_m:.3f} | {p.obstacle_velocity_scale:.2f} | "
-        f"{p.torque_scale:.2f} | {p.yaw_ratio:.2f} | {p.episode_seed} |"
+        f"| {p.index} | {r['outcome']}{failed} | {'yes' if r['passed'] else 'no'} | "
+        f"{_num(r['min_clearance_m'])} | {p.ground_friction:.2f} | {p.payload_kg:.1f} | {p.latency_steps} | "
+        f"{p.pose_xy_std_m:.3f} | {p.pose_yaw_std_rad:.3f} | {p.obstacle_xy_std_m:.3f} | "
+        f"{p.obstacle_velocity_scale:.2f} | {p.torque_scale:.2f} | {p.yaw_ratio:.2f} | "
+        f"{_num(steer['turn_in_place_radps'], '.2f')} | {_num(steer['current_headroom_a'], '.1f')} | "
+        f"{p.episode_seed} |"
     )
 
 
@@ -378,13 +428,24 @@ def markdown(report: CheckReport, plots: dict[str, str]) -> str:
             "|" + "---|" * len(pct),
             "| " + " | ".join(f"{v:.3f}" for v in pct.values()) + " |",
         ]
-    for title, name in (("Clearance distribution", "histogram"), ("Sensitivity", "sensitivity")):
+    if s["failures_by_class"]:
+        lines.append(
+            "- failures by class (plant: the sample's robot cannot pivot, see steerability): "
+            + ", ".join(f"{k} {v}" for k, v in s["failures_by_class"].items())
+        )
+    figures = (
+        ("Clearance distribution", "histogram"),
+        ("Sensitivity", "sensitivity"),
+        ("Payload", "payload"),
+    )
+    for title, name in figures:
         if name in plots:
             lines += ["", f"![{title}]({plots[name]})"]
     header = [
         "| sample | outcome | passed | min clearance (m) | friction | payload (kg) | latency | pose std (m) "
-        "| yaw std (rad) | obstacle std (m) | obstacle speed x | torque x | yaw ratio | episode seed |",
-        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
+        "| yaw std (rad) | obstacle std (m) | obstacle speed x | torque x | yaw ratio "
+        "| turn in place (rad/s) | current headroom (A) | episode seed |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     if report.failure_files:
         lines += [

@@ -37,6 +37,7 @@ from typing import Any
 
 import numpy as np
 
+from husky_sim.realcheck.steerability import steerability
 from husky_sim.runs.parallel import Backend, parallel_map
 from husky_sim.runs.scenario import Scenario, scenario_from_data
 from husky_sim.sim.geometry import load_geometry
@@ -177,7 +178,8 @@ class SampleTask:
 
 
 def run_sample(task: SampleTask) -> dict[str, Any]:
-    """Run one perturbed scenario in PyBullet; return its headline metrics (JSON-able)."""
+    """Run one perturbed scenario in PyBullet; return its headline metrics and its robot's
+    steerability (a short open-loop probe of the same plant; JSON-able)."""
     from husky_sim.runs.run import run_scenario  # imported in the worker
 
     scenario = scenario_from_data(task.scenario, f"check sample {task.index}")
@@ -196,6 +198,7 @@ def run_sample(task: SampleTask) -> dict[str, Any]:
     )
     out = {"index": task.index, **{k: summary[k] for k in keys}}
     out["passed"] = bool(summary["converged"]) and not bool(summary["collided"])
+    out["steerability"] = steerability(scenario)
     return out
 
 

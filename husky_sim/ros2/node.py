@@ -62,6 +62,7 @@ SERVE_LOG_COLUMNS = (
     "recovered_by",
     "soft_constraint",
     "guided",
+    "escape",
     "safety_active",
     "solve_ms",
     "odom_latency_ms",
@@ -77,6 +78,7 @@ CONTROLLER_COUNTS = (
     "recoveries",
     "soft_constraint_steps",
     "guided_steps",
+    "escape_steps",
     "safety_active_steps",
     "repeated_steps",
 )
@@ -302,6 +304,7 @@ class ControllerNode:
         counts["recoveries"] += bool(result.recovered_by)
         counts["soft_constraint_steps"] += result.soft_constraint
         counts["guided_steps"] += result.guided
+        counts["escape_steps"] += bool(result.escape)
         counts["safety_active_steps"] += result.safety_active > 0
         counts["repeated_steps"] += result.repeated
         self._log_row(
@@ -321,6 +324,7 @@ class ControllerNode:
             recovered_by=result.recovered_by,
             soft_constraint=int(result.soft_constraint),
             guided=int(result.guided),
+            escape=result.escape,
             safety_active=int(result.safety_active),
             solve_ms=1000.0 * solve_s,
             odom_latency_ms=latency_ms,

@@ -27,6 +27,7 @@ from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, ValidationEr
 
 from controllers import NMPCConfig, SafetyConstraint
 from husky_sim.paths import SCENARIO_DIR
+from husky_sim.runs.settings_schema import HuskyCBFSettings
 from husky_sim.scenario_file import ScenarioFileError, read_scenario_data
 from husky_sim.sim.drive import DriveConfig
 from husky_sim.sim.episode import EpisodeConfig
@@ -316,6 +317,9 @@ class ControllerSpec(_Strict):
     obstacle_prediction: Literal["constant-velocity", "frozen"] = NMPCConfig.obstacle_prediction
     #: NLP solver (controllers.backends); omitted: the controllers' default (SolverOptions)
     solver: Literal["ipopt", "fatrop"] | None = None
+    #: husky-cbf's own settings (controllers.husky_cbf.config, with their reasons); omitted ones
+    #: keep their defaults; the paper's controllers ignore them
+    husky_cbf: HuskyCBFSettings | None = None
 
 
 class DriveSpec(_Strict):

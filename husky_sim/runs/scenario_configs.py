@@ -20,6 +20,7 @@ from controllers import (
 )
 from controllers.husky_cbf import Footprint, HuskyCBFConfig, HuskyCBFController, RobotResponse
 from controllers.husky_cbf.config import PoseNoise
+from husky_sim.runs.settings_schema import apply_settings
 from husky_sim.sim.episode import EpisodeConfig
 from husky_sim.sim.geometry import load_geometry
 from husky_sim.sim.ground import load_ground, with_friction
@@ -67,6 +68,7 @@ def controller_config(sc: Scenario, safety: SafetyConstraint) -> NMPCConfig:
     gamma are the file's: overrides are applied once, by `with_overrides`)."""
     # ControllerSpec's fields are NMPCConfig's fields by name; `solver` names SolverOptions.backend
     fields = sc.controller.model_dump()
+    fields.pop("husky_cbf")  # husky-cbf's own (husky_cbf_config)
     backend = fields.pop("solver")
     if backend is not None:
         fields["solver"] = SolverOptions(backend=backend)
@@ -85,8 +87,7 @@ def husky_cbf_config(sc: Scenario) -> HuskyCBFConfig:
     drive = sc.drive.config()
     yaw = sc.robot.yaw_response_params()
     geometry = load_geometry()
-    slots = min(max(len(sc.obstacle_specs()), 1), HuskyCBFConfig.slots)
-    return HuskyCBFConfig(
+    config = HuskyCBFConfig(
         nmpc=controller_config(sc, "relax-cbf"),
         response=RobotResponse(
             drive.max_linear_accel_mps2,
@@ -99,10 +100,12 @@ def husky_cbf_config(sc: Scenario) -> HuskyCBFConfig:
         ),
         footprint=Footprint(*geometry.footprint_half_extents_m),
         omega_cmd_max_radps=drive.max_angular_radps,
-        slots=slots,
         # what a localisation would report about its own noise
         pose_noise=PoseNoise(sc.sensing.pose_xy_std_m, sc.sensing.pose_yaw_std_rad),
     )
+    config = apply_settings(config, sc.controller.husky_cbf)
+    # no more obstacle slots than the scenario has obstacles: each costs OCP rows
+    return dataclasses.replace(config, slots=min(max(len(sc.obstacle_specs()), 1), config.slots))
 
 
 def make_controller(sc: Scenario, name: str) -> Controller:

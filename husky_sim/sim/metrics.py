@@ -177,6 +177,8 @@ class EpisodeMetrics:
     recovered_by: str  # how often each retry guess succeeded, e.g. "reverse=2 straight=1"
     soft_constraint_steps: int  # steps solved only with the obstacle constraint's penalised slack
     guided_steps: int  # steps that tracked a guidance waypoint (the straight path was blocked)
+    escapes: int  # deadlock escapes started: the controller found no progress (husky-cbf)
+    escape_steps: int  # steps that followed an escape's waypoint
     deadline_misses: int
     safety_active_steps: int
     steps: int
@@ -233,6 +235,7 @@ def summarise(
     reversals, reverse_steps = count_reversals(col["v_cmd_mps"])
     accel = np.abs(np.diff(applied, axis=0)) / physics_dt_s if len(applied) > 1 else np.zeros((1, 2))
     solve = solver_times(col["solve_ms"], col["repeated"])
+    escaping = np.array([r["escape"] != "" for r in rows], dtype=bool)  # on an escape's waypoint
 
     def solve_stat(percentile: float) -> float | None:  # None: no solve happened (interrupted at once)
         return float(np.percentile(solve, percentile)) if solve.size else None
@@ -279,6 +282,8 @@ def summarise(
         ),
         soft_constraint_steps=int(np.sum(col["soft_constraint"])),
         guided_steps=int(np.sum(col["guided"])),
+        escapes=int(np.sum(escaping & ~np.concatenate([[False], escaping[:-1]]))),
+        escape_steps=int(np.sum(escaping)),
         deadline_misses=int(np.sum(col["deadline_miss"])),
         safety_active_steps=int(np.sum(col["safety_active"] > 0)),
         steps=len(rows),

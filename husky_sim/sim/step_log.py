@@ -50,6 +50,7 @@ LOG_COLUMNS = (
     "recovered_by",
     "soft_constraint",
     "guided",
+    "escape",
     "deadline_miss",
     "solve_ms",
 )

@@ -21,6 +21,7 @@ from husky_sim.realcheck.audit import (
     measure_solve_times,
 )
 from husky_sim.realcheck.check import CheckOptions, sweep_stats, verdict
+from husky_sim.realcheck.steerability import CAN_PIVOT_RADPS, failure_class, steerability
 from husky_sim.realcheck.sweep import (
     WALL_CLOCK_KEYS,
     PerturbationRanges,
@@ -86,7 +87,14 @@ def test_audit_fails_the_papers_radius_and_passes_a_sane_one() -> None:
     findings = audit(paper, fast)
     assert [f.check for f in findings if f.status == "fail"] == ["robot radius"]
     nominal = {"passed": True, "outcome": "reached"}
-    one_pass = {"index": 0, "passed": True, "collided": False, "outcome": "reached", "min_clearance_m": 0.4}
+    one_pass = {
+        "index": 0,
+        "passed": True,
+        "collided": False,
+        "outcome": "reached",
+        "min_clearance_m": 0.4,
+        "steerability": {"turn_in_place_radps": 1.0, "current_headroom_a": 15.0},  # an unloaded robot
+    }
     stats, samples = sweep_stats([one_pass]), sample_perturbations(PerturbationRanges(), 1, 0)
     decision, reason = verdict(findings, nominal, stats, samples, 0.9)
     assert decision == "FAIL" and "robot radius" in reason
@@ -255,9 +263,15 @@ def test_check_cli_writes_reports_and_a_failing_sample_reproduces(
     assert report["perturbations"] == [p.as_dict() for p in sample_perturbations(ranges, 2, 5)]
     assert report["ranges"]["payload_kg"] == [10.0, 20.0]
     assert all(10.0 <= p["payload_kg"] <= 20.0 for p in report["perturbations"])
-    for name in ("check.md", "clearance_hist.png", "sensitivity.png"):
+    for name in ("check.md", "clearance_hist.png", "sensitivity.png", "pass_rate_by_payload.png"):
         assert (out / name).stat().st_size > 0
-    assert "## Configuration audit" in (out / "check.md").read_text()
+    text = (out / "check.md").read_text()
+    assert "## Configuration audit" in text and "turn in place (rad/s)" in text
+    # each sample's robot was probed: 10 to 20 kg turns in place (about 1 rad/s of 1 unloaded)
+    for result in report["results"]:
+        assert result["steerability"]["turn_in_place_radps"] > CAN_PIVOT_RADPS
+        assert result["steerability"]["current_headroom_a"] > 0.0
+    assert report["stats"]["failures_by_class"] == {"controller": 2}  # robots that could pivot
 
     # the saved sample reloads and `husky-sim run` gives the same result, to the last bit
     sample = report["results"][1]
@@ -308,3 +322,21 @@ def test_check_options_validate() -> None:
         CheckOptions(min_pass_rate=1.5)
     with pytest.raises(ValueError, match="backend"):
         CheckOptions(backend="ray")  # type: ignore[arg-type]
+
+
+def test_a_failure_is_the_plants_when_its_robot_cannot_pivot() -> None:
+    """The probe of a robot that turns in place is fine; 75 kg at a third of the current limit
+    barely turns and has no current to spare: its failures are the plant's."""
+    base = load_scenario("head_on_moving_obstacle")
+    light = steerability(base)
+    assert light["turn_in_place_radps"] > 0.8 and light["current_headroom_a"] > 5.0
+    assert failure_class(light) == "controller"
+    heavy = base.model_copy(
+        update={
+            "robot": base.robot.model_copy(update={"payload_kg": 75.0}),
+            "drive": base.drive.model_copy(update={"current_limit_a": 9.0}),
+        }
+    )
+    probe = steerability(heavy)
+    assert probe["turn_in_place_radps"] < CAN_PIVOT_RADPS or probe["current_headroom_a"] <= 0.0
+    assert failure_class(probe) == "plant"

@@ -16,6 +16,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from pydantic import BaseModel
 
+from controllers.husky_cbf import HuskyCBFConfig
 from husky_sim.cli import main
 from husky_sim.runs.run_folder import default_run_dir, run_dir_name
 from husky_sim.runs.scenario import (
@@ -83,6 +84,10 @@ def _base_for(path: tuple) -> dict[str, Any]:
         data["robot"]["radius_m"] = 0.8
     if path[:2] == ("robot", "yaw_response"):  # optional; when given, both of its numbers are required
         data["robot"]["yaw_response"] = {"gain": 0.5, "time_constant_s": 0.5}
+    if path[:2] == ("controller", "husky_cbf"):  # optional, as are all of its settings
+        data["controller"] = {"husky_cbf": {"guidance": {}, "escape": {}}}
+        if isinstance(path[-1], int):  # an entry of a tuple setting: the whole tuple, as its default
+            data["controller"]["husky_cbf"][path[2]] = list(getattr(HuskyCBFConfig, path[2]))
     return scenario_from_data(data).model_dump(mode="json")
 
 
@@ -134,6 +139,7 @@ def test_every_number_rejects_non_finite_and_coerced_values(
     if bad is None and (
         path[0] in ("drive", "friction")
         or path[-1] in ("heading_rad", "speed_mps", "radius_margin_m", "radius_m")
+        or path[:2] == ("controller", "husky_cbf")
     ):
         return  # None means "not given" for these optional fields (for friction: the ground's own)
     data = _set(_base_for(path), path, bad)
@@ -162,6 +168,8 @@ def test_any_number_anywhere_loads_finite_or_fails_in_one_line(
     assert all(math.isfinite(x) for x in numbers)
     episode = sc.episode_config()  # what runs is built without surprises
     assert math.isfinite(episode.duration_s) and episode.tau_s > 0
+    if path[:2] == ("controller", "husky_cbf"):  # the schema's ranges are the config's own
+        sc.husky_cbf_config()
 
 
 def _all_numbers(node: Any) -> list[float]:

@@ -1,0 +1,215 @@
+"""Deadlock escape for husky-cbf: a progress checker and recovery behaviours, as Nav2 has them.
+
+A CBF-constrained NMPC can settle where the gradient of its cost meets an obstacle's barrier (an
+obstacle between the robot and its goal, a goal straight behind it with the opposite heading):
+every plan it can see within its horizon costs more than standing still. The progress checker
+notices (the robot neither came `progress_min_m` closer to its target nor moved that far within
+`progress_window_s`, or it was commanded to stand still for `idle_s`, away from the target), and
+the escape then hands the NMPC waypoints the short horizon cannot find by itself:
+
+1. `turn`: where it stands, to face the way (the bearing to a point `drive_m` along a shortest
+   path round the obstacles, guidance.Guidance.path), if it faces more than `aim_rad` away;
+2. `drive`: to that point;
+3. a stall again within `memory_radius_m` of an earlier one starts with `back_up` (`back_up_m`
+   straight back, where that is free) and marks the spot as a virtual obstacle of
+   `tabu_radius_m` for the next `tabu_s`, so that the path (and guidance afterwards) goes
+   another way: the spot is a local minimum, and the way through it has failed twice.
+
+The NMPC's obstacle constraints stay in force throughout: the escape only moves the target.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from collections.abc import Callable
+
+import numpy as np
+
+from controllers.husky_cbf.config import EscapeConfig
+from controllers.husky_cbf.guidance import Waypoint, segment_blocked
+from controllers.model import wrap_angle
+
+#: a path from the robot to the target (m), given extra circles [x, y, r] to avoid: Guidance.path
+PathPlanner = Callable[[np.ndarray, np.ndarray, np.ndarray], "np.ndarray | None"]
+
+
+class ProgressChecker:
+    """Whether the robot is stalled short of its target: over the last `progress_window_s` it
+    came less than `progress_min_m` closer to it and moved less than that (m), or its commands
+    were idle for the last `idle_s`; never within `near_m` of the target."""
+
+    def __init__(self, config: EscapeConfig, tau_s: float) -> None:
+        self.config = config
+        self._window = max(round(config.progress_window_s / tau_s), 1)
+        self.idle_steps = max(round(config.idle_s / tau_s), 1)
+        self._history: deque[tuple[np.ndarray, float, bool]] = deque(maxlen=self._window + 1)
+
+    def reset(self) -> None:
+        self._history.clear()
+
+    def update(self, xy: np.ndarray, distance_m: float, idle: bool) -> str:
+        """Add this step's position (m), distance to the target (m) and whether its command is
+        idle; the stall: "idle" (told to stand still), "slow" (no progress), or "" (none)."""
+        cfg = self.config
+        self._history.append((np.asarray(xy, dtype=float).copy(), float(distance_m), bool(idle)))
+        if distance_m <= cfg.near_m:
+            return ""
+        recent = list(self._history)[-self.idle_steps :]
+        if len(recent) == self.idle_steps and all(i for _, _, i in recent):
+            return "idle"
+        if len(self._history) <= self._window:
+            return ""
+        first_xy, first_distance, _ = self._history[0]
+        closer = first_distance - distance_m
+        moved = float(np.max(np.hypot(*(np.array([h[0] for h in self._history]) - first_xy).T)))
+        return "slow" if closer < cfg.progress_min_m and moved < cfg.progress_min_m else ""
+
+
+class Escape:
+    """The recovery behaviours after a stall (module docstring): a queue of phases, each a
+    waypoint held until it is reached, times out, or the robot stalls in it."""
+
+    def __init__(self, config: EscapeConfig, tau_s: float, inflation_m: float) -> None:
+        self.config = config
+        self.tau_s = tau_s
+        self.inflation_m = inflation_m
+        self.checker = ProgressChecker(config, tau_s)
+        self.reset()
+
+    def reset(self) -> None:
+        self.checker.reset()
+        self.phase = ""  # "", "back_up", "turn" or "drive"
+        self._queue: list[str] = []
+        self._waypoint: Waypoint | None = None
+        self._phase_steps = 0
+        self._stalls: list[tuple[np.ndarray, float]] = []  # where and when (s) stalls happened
+        self._tabu: list[tuple[float, float, float, float]] = []  # x, y, r (m), until (s)
+        self.started = 0  # escapes started since reset
+
+    @property
+    def reversing(self) -> bool:
+        """Whether the robot is meant to move backwards now (backing up)."""
+        return self.phase == "back_up"
+
+    def pause(self) -> None:
+        """Stop any escape and forget the progress so far (the robot leaves its way on purpose);
+        the stalls and tabu spots are kept."""
+        self.checker.reset()
+        self.phase, self._queue, self._waypoint, self._phase_steps = "", [], None, 0
+
+    def tabu_circles(self, t: float) -> np.ndarray:
+        """(M, 3) virtual obstacles [x, y, r] (m) at stall spots still remembered at t (s)."""
+        self._tabu = [c for c in self._tabu if c[3] > t]
+        return np.array([c[:3] for c in self._tabu]).reshape(-1, 3)
+
+    def waypoint(
+        self,
+        pose: np.ndarray,
+        target: np.ndarray,
+        command: np.ndarray,
+        circles: np.ndarray,
+        plan_path: PathPlanner,
+        t: float,
+    ) -> Waypoint | None:
+        """The escape's waypoint this step, or None when not escaping. `target` (x, y, heading;
+        m, m, rad) is where the robot is going, `command` the last command [v, omega] (m/s,
+        rad/s), `circles` the inflated obstacles (guidance.inflated_circles), `plan_path` the
+        shortest-path search."""
+        cfg = self.config
+        pose = np.asarray(pose, dtype=float)
+        distance = math.hypot(*(np.asarray(target[:2]) - pose[:2]))
+        idle = abs(command[0]) < cfg.idle_speed_mps and abs(command[1]) < cfg.idle_yaw_rate_radps
+        stalled = self.checker.update(pose[:2], distance, idle)
+        if self.phase:
+            self._phase_steps += 1
+            if stalled == "idle":  # told to stand still in an escape: pinned, back up
+                self._start(pose, target, circles, plan_path, t, repeat=True)
+            elif self._phase_done(pose):
+                self._next_phase(pose, target, circles, plan_path, t)
+        elif stalled:
+            self._start(pose, target, circles, plan_path, t, repeat=stalled == "idle")
+        return self._waypoint if self.phase else None
+
+    # -- phases -------------------------------------------------------------------------------
+    def _start(
+        self,
+        pose: np.ndarray,
+        target: np.ndarray,
+        circles: np.ndarray,
+        plan_path: PathPlanner,
+        t: float,
+        repeat: bool,
+    ) -> None:
+        """Start an escape; `repeat`: the robot is pinned (told to stand still, or stalled in an
+        escape), so back up first."""
+        cfg = self.config
+        again = any(
+            math.hypot(*(xy - pose[:2])) < cfg.memory_radius_m and t - when < cfg.tabu_s
+            for xy, when in self._stalls
+        )
+        self._stalls.append((pose[:2].copy(), t))
+        self._queue = ["back_up", "turn", "drive"] if repeat or again else ["turn", "drive"]
+        if again:  # the way through this spot failed before: guidance goes round it now
+            self._tabu.append((float(pose[0]), float(pose[1]), cfg.tabu_radius_m, t + cfg.tabu_s))
+        self.started += 1
+        self._next_phase(pose, target, circles, plan_path, t)
+
+    def _next_phase(
+        self, pose: np.ndarray, target: np.ndarray, circles: np.ndarray, plan_path: PathPlanner, t: float
+    ) -> None:
+        """Enter the next phase that has something to do; none left: the escape ends."""
+        self.phase, self._waypoint, self._phase_steps = "", None, 0
+        while self._queue:
+            phase = self._queue.pop(0)
+            waypoint = self._phase_waypoint(phase, pose, target, circles, plan_path, t)
+            if waypoint is not None:
+                self.phase, self._waypoint = phase, waypoint
+                break
+        self.checker.reset()  # progress is judged afresh in each phase and after the escape
+
+    def _phase_waypoint(
+        self,
+        phase: str,
+        pose: np.ndarray,
+        target: np.ndarray,
+        circles: np.ndarray,
+        plan_path: PathPlanner,
+        t: float,
+    ) -> Waypoint | None:
+        cfg = self.config
+        xy, heading = pose[:2], float(pose[2])
+        if phase == "back_up":
+            behind = xy - cfg.back_up_m * np.array([math.cos(heading), math.sin(heading)])
+            if segment_blocked(xy, behind, circles):
+                return None
+            return Waypoint(float(behind[0]), float(behind[1]), heading, np.array([xy, behind]))
+        way = self._way_point(xy, target, plan_path, t)
+        bearing = math.atan2(way[1] - xy[1], way[0] - xy[0])
+        if phase == "turn":
+            if abs(float(wrap_angle(bearing - heading))) <= cfg.aim_rad:
+                return None
+            return Waypoint(float(xy[0]), float(xy[1]), bearing, np.array([xy, xy]))
+        return Waypoint(float(way[0]), float(way[1]), bearing, np.array([xy, way]))
+
+    def _way_point(self, xy: np.ndarray, target: np.ndarray, plan_path: PathPlanner, t: float) -> np.ndarray:
+        """The point drive_m along a shortest path to the target avoiding the tabu spots (m); the
+        target itself, or the point drive_m towards it, when there is no path."""
+        cfg = self.config
+        goal = np.asarray(target[:2], dtype=float)
+        path = plan_path(xy, goal, self.tabu_circles(t))
+        if path is None or len(path) < 2:
+            offset = goal - xy
+            length = math.hypot(*offset)
+            return goal if length <= cfg.drive_m else xy + cfg.drive_m * offset / length
+        along = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(path, axis=0).T))])
+        index = int(np.searchsorted(along, cfg.drive_m))
+        return np.asarray(path[min(index, len(path) - 1)], dtype=float)
+
+    def _phase_done(self, pose: np.ndarray) -> bool:
+        cfg, waypoint = self.config, self._waypoint
+        if waypoint is None or self._phase_steps * self.tau_s > cfg.phase_timeout_s:
+            return True
+        if self.phase == "turn":
+            return abs(float(wrap_angle(waypoint.heading_rad - pose[2]))) <= 0.5 * cfg.aim_rad
+        return math.hypot(waypoint.x_m - pose[0], waypoint.y_m - pose[1]) <= cfg.arrive_m

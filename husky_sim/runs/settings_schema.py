@@ -1,0 +1,77 @@
+"""The scenario schema's part for a controller's own settings (`controller.husky_cbf`), made from
+the controller's configuration dataclasses: every setting that carries a Range there
+(controllers.husky_cbf.config.setting) may be given, checked against that range, and nothing
+else. So a setting's default, its range and its reason live in one place, the controller's
+config, and the schema cannot drift from it."""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Annotated, Any
+
+from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, StrictBool, create_model
+
+from controllers.husky_cbf.config import EscapeConfig, GuidanceConfig, HuskyCBFConfig, Range
+
+
+class _Settings(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+def _field_type(allowed: Range, default: object) -> Any:
+    """An optional field taking what `allowed` contains (one value, or a tuple of them as long as
+    the default); None: not given. The error names the range."""
+    length = len(default) if isinstance(default, tuple) else None
+    kind = "an integer" if allowed.integer else "a finite number"
+    message = f"must be {kind} in {allowed.text()}"
+    if length is not None:
+        message = f"must be {length} entries, each {kind} in {allowed.text()}"
+
+    def check(value: object) -> object:
+        if value is None:
+            return None
+        values = value if length is not None else (value,)
+        if length is not None and (not isinstance(value, list | tuple) or len(value) != length):
+            raise ValueError(message)
+        if not all(allowed.contains(v) for v in values):
+            raise ValueError(message)
+        if length is not None:
+            return tuple(float(v) for v in values)
+        return value if allowed.integer else float(value)
+
+    number: Any = int if allowed.integer else float
+    kind_type: Any = tuple[(number,) * length] if length is not None else number
+    shown = Field(default=None, json_schema_extra={"range": allowed.text()})  # for the docs
+    return Annotated[kind_type | None, BeforeValidator(check), shown]
+
+
+def _model(config: type, name: str, nested: dict[str, type[BaseModel]]) -> type[BaseModel]:
+    """A pydantic model of `config`'s ranged and boolean settings (each optional: omitted ones
+    keep the default) and the `nested` sub-models."""
+    fields: dict[str, Any] = {}
+    for f in dataclasses.fields(config):
+        allowed = f.metadata.get("range")
+        if f.name in nested:
+            fields[f.name] = (nested[f.name] | None, None)
+        elif allowed is not None:
+            fields[f.name] = (_field_type(allowed, f.default), None)
+        elif isinstance(f.default, bool):
+            fields[f.name] = (StrictBool | None, None)
+    return create_model(name, __base__=_Settings, __doc__=(config.__doc__ or "").strip(), **fields)
+
+
+GuidanceSettings = _model(GuidanceConfig, "GuidanceSettings", {})
+EscapeSettings = _model(EscapeConfig, "EscapeSettings", {})
+HuskyCBFSettings = _model(
+    HuskyCBFConfig, "HuskyCBFSettings", {"guidance": GuidanceSettings, "escape": EscapeSettings}
+)
+
+
+def apply_settings(config: HuskyCBFConfig, settings: BaseModel | None) -> HuskyCBFConfig:
+    """`config` with the settings a scenario gave (`controller.husky_cbf`); none: unchanged."""
+    if settings is None:
+        return config
+    given = settings.model_dump(exclude_none=True)
+    guidance = dataclasses.replace(config.guidance, **given.pop("guidance", {}))
+    escape = dataclasses.replace(config.escape, **given.pop("escape", {}))
+    return dataclasses.replace(config, **given, guidance=guidance, escape=escape)
