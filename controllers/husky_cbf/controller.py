@@ -69,7 +69,10 @@ class HuskyCBFController:
         self._soft_problem, self._soft = solver_for(config, base.horizon, config.slots, soft=True)
         self._solver_fallbacks: list[str] = []  # this step's reasons the structured solver failed
         self._discs, self._disc_radius = disc_cover(config.footprint, config.disc_excess_m)
-        self._guidance = Guidance(config.guidance, self._disc_radius + config.margin_m)
+        # guidance's movers as wide as the NMPC's (_obstacles) at the horizon's middle
+        plan_s = config.response.command_delay_s + 0.5 * base.horizon * base.tau_s
+        growth_s = 0.5 * config.mover_sweep_s + config.mover_margin_per_m * plan_s
+        self._guidance = Guidance(config.guidance, self._disc_radius + config.margin_m, growth_s)
         self._approach = LineApproach(config.guidance)
         self._evasion = MoverEvasion(config.guidance, self._disc_radius + config.margin_m)
         self._escape = Escape(config.escape, base.tau_s, self._disc_radius + config.margin_m)

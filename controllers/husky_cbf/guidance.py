@@ -40,14 +40,19 @@ class Waypoint:
 
 
 def inflated_circles(
-    obstacles: Sequence[Obstacle], inflation_m: float, sweep_s: float, robot_xy: np.ndarray
+    obstacles: Sequence[Obstacle],
+    inflation_m: float,
+    sweep_s: float,
+    robot_xy: np.ndarray,
+    mover_growth_s: float = 0.0,
 ) -> np.ndarray:
-    """(M, 3) circles [x, y, r] (m): obstacles inflated by `inflation_m`, movers swept over
-    sweep_s; a circle that holds the robot is shrunk to just exclude it (the robot is where it is)."""
+    """(M, 3) circles [x, y, r] (m): obstacles inflated by `inflation_m` (a mover by its speed
+    times mover_growth_s more), movers swept over sweep_s; a circle that holds the robot is shrunk
+    to just exclude it (the robot is where it is)."""
     circles = []
     for ob in obstacles:
-        radius = ob.radius_m + inflation_m
         speed = math.hypot(ob.vx_mps, ob.vy_mps)
+        radius = ob.radius_m + inflation_m + mover_growth_s * speed
         # a circle every half radius along the track: neighbours overlap, the track is covered
         samples = max(int(math.ceil(speed * sweep_s / (0.5 * radius))) + 1, 1) if speed > 1e-3 else 1
         for t in np.linspace(0.0, sweep_s if samples > 1 else 0.0, samples):
@@ -76,9 +81,13 @@ class Guidance:
     """Remembers whether the last step was guided (for the release margin) and the path it took
     (which the next search favours: path_hysteresis)."""
 
-    def __init__(self, config: GuidanceConfig, inflation_m: float) -> None:
+    def __init__(self, config: GuidanceConfig, inflation_m: float, mover_growth_s: float = 0.0) -> None:
         self.config = config
         self.inflation_m = inflation_m
+        #: a mover's circles grow by its speed times this (s): the NMPC's own mover model is wider
+        #: than its track (HuskyCBFConfig.mover_sweep_s, mover_margin_per_m), and a path through a
+        #: gap the NMPC holds closed leads the robot into a wait (paper_dynamic_tracking_crossing)
+        self.mover_growth_s = mover_growth_s
         self.reset()
 
     def reset(self) -> None:
@@ -90,7 +99,9 @@ class Guidance:
     ) -> np.ndarray:
         """(M, 3) circles [x, y, r] (m) that guidance avoids: the obstacles inflated and swept
         (inflated_circles) and `extra` ones (the escape's tabu spots), neither over the robot."""
-        circles = inflated_circles(obstacles, self.inflation_m, self.config.mover_sweep_s, robot_xy)
+        circles = inflated_circles(
+            obstacles, self.inflation_m, self.config.mover_sweep_s, robot_xy, self.mover_growth_s
+        )
         if extra is not None and len(extra):
             extra = np.array(extra, dtype=float).reshape(-1, 3)
             dist = np.hypot(extra[:, 0] - robot_xy[0], extra[:, 1] - robot_xy[1])
