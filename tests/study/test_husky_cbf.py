@@ -1,7 +1,8 @@
 """husky-cbf in PyBullet: every shipped scenario and scenarios it was not tuned on, at N = 5, 7
 and 12, on the FATROP and IPOPT backends, with plain assertions: no collision (physics clearance
 > 0) and converged (reached the goal, or tracked under the suite's tracking definition,
-husky_sim.sim.metrics). Plus the pieces it is made of: the footprint discs, the extended model,
+husky_sim.sim.metrics); the deadlock layouts its recovery was developed on, and those held out
+from it (N = 5 and 12). Plus the pieces it is made of: the footprint discs, the extended model,
 guidance, the dead-time prediction and the exact-penalty re-solve."""
 
 from __future__ import annotations
