@@ -75,7 +75,7 @@ class HuskyCBFController:
         self._guidance = Guidance(config.guidance, self._disc_radius + config.margin_m, growth_s)
         self._approach = LineApproach(config.guidance)
         self._evasion = MoverEvasion(config.guidance, self._disc_radius + config.margin_m)
-        self._escape = Escape(config.escape, base.tau_s, self._disc_radius + config.margin_m)
+        self._escape = Escape(config.escape, base.tau_s)
         self._step = extended_step(base.tau_s, config.response)
         self._pipe = CommandPipe(config.response, base.tau_s)
         self._pose_filter = PoseFilter(config.pose_noise, base.tau_s)

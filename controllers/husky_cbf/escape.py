@@ -8,12 +8,13 @@ notices (the robot neither came `progress_min_m` closer to its target nor moved 
 the escape then hands the NMPC waypoints the short horizon cannot find by itself:
 
 1. `turn`: where it stands, to face the way (the bearing to a point `drive_m` along a shortest
-   path round the obstacles, guidance.Guidance.path), if it faces more than `aim_rad` away;
+   path round the obstacles, guidance.Guidance.plan_path), if it faces more than `aim_rad` away;
 2. `drive`: to that point;
-3. a stall again within `memory_radius_m` of an earlier one starts with `back_up` (`back_up_m`
-   straight back, where that is free) and marks the spot as a virtual obstacle of
-   `tabu_radius_m` for the next `tabu_s`, so that the path (and guidance afterwards) goes
-   another way: the spot is a local minimum, and the way through it has failed twice.
+3. a robot told to stand still (pinned at an obstacle), or stalled again within
+   `memory_radius_m` of an earlier stall, starts with `back_up` (`back_up_m` straight back, where
+   that is free); a repeated stall also marks the spot as a virtual obstacle of `tabu_radius_m`
+   for the next `tabu_s`, so that the path (and guidance afterwards) goes another way: the spot
+   is a local minimum, and the way through it has failed twice.
 
 The NMPC's obstacle constraints stay in force throughout: the escape only moves the target.
 """
@@ -30,7 +31,7 @@ from controllers.husky_cbf.config import EscapeConfig
 from controllers.husky_cbf.guidance import Waypoint, segment_blocked
 from controllers.model import wrap_angle
 
-#: a path from the robot to the target (m), given extra circles [x, y, r] to avoid: Guidance.path
+#: a path from the robot to the target (m), given extra circles [x, y, r] to avoid: Guidance.plan_path
 PathPlanner = Callable[[np.ndarray, np.ndarray, np.ndarray], "np.ndarray | None"]
 
 
@@ -70,10 +71,9 @@ class Escape:
     """The recovery behaviours after a stall (module docstring): a queue of phases, each a
     waypoint held until it is reached, times out, or the robot stalls in it."""
 
-    def __init__(self, config: EscapeConfig, tau_s: float, inflation_m: float) -> None:
+    def __init__(self, config: EscapeConfig, tau_s: float) -> None:
         self.config = config
         self.tau_s = tau_s
-        self.inflation_m = inflation_m
         self.checker = ProgressChecker(config, tau_s)
         self.reset()
 

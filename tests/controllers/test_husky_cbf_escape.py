@@ -43,7 +43,7 @@ def test_the_progress_checker_names_idle_and_slow_stalls_and_leaves_progress_alo
 
 
 def test_a_slow_stall_turns_to_the_way_then_drives_along_it() -> None:
-    escape = Escape(EscapeConfig(), TAU, INFLATION)
+    escape = Escape(EscapeConfig(), TAU)
     target = np.array([-3.0, 0.0, math.pi])  # behind the robot
     pose = np.array([0.0, 0.0, 0.0])
     none = np.zeros((0, 3))
@@ -62,12 +62,12 @@ def test_a_robot_told_to_stand_still_backs_up_first_where_there_is_room() -> Non
     config = EscapeConfig()
     target = np.array([4.0, 0.0, 0.0])
     pose = np.array([0.0, 0.0, 0.0])
-    escape = Escape(config, TAU, INFLATION)
+    escape = Escape(config, TAU)
     for k in range(escape.checker.idle_steps):
         waypoint = escape.waypoint(pose, target, IDLE, np.zeros((0, 3)), _no_path, 0.1 * k)
     assert escape.phase == "back_up" and escape.reversing
     assert (waypoint.x_m, waypoint.y_m) == pytest.approx((-config.back_up_m, 0.0))
-    walled = Escape(config, TAU, INFLATION)  # an obstacle right behind: no back-up
+    walled = Escape(config, TAU)  # an obstacle right behind: no back-up
     behind = np.array([[-0.6, 0.0, 0.3]])
     for k in range(walled.checker.idle_steps):
         walled.waypoint(pose, target, IDLE, behind, _no_path, 0.1 * k)
@@ -77,7 +77,7 @@ def test_a_robot_told_to_stand_still_backs_up_first_where_there_is_room() -> Non
 def test_a_second_stall_at_the_same_spot_marks_it_and_the_path_goes_round_it() -> None:
     config = EscapeConfig()
     guidance = Guidance(GuidanceConfig(), INFLATION)
-    escape = Escape(config, TAU, INFLATION)
+    escape = Escape(config, TAU)
     pose, target = np.array([0.0, 0.0, 0.0]), np.array([4.0, 0.0, 0.0])
 
     def plan(xy: np.ndarray, goal: np.ndarray, extra: np.ndarray) -> np.ndarray | None:
