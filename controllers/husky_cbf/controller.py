@@ -92,7 +92,6 @@ class HuskyCBFController:
 
     def reset(self) -> None:
         self._plan: ExtendedPlan | None = None
-        self._set_point = True  # whether this step's reference is a set-point
         self._pipe.reset()
         self._omega_body = 0.0  # body yaw rate predicted for now (rad/s)
         self._predicted_turn = 0.0  # heading change predicted over the last control step (rad)
@@ -147,7 +146,8 @@ class HuskyCBFController:
         # set-point's line (or at a slow trajectory's point), the goal
         slow_trajectory = stationary and not isinstance(reference, SetPoint)
         target = self._evasion.waypoint(pose, 0.0 if slow_trajectory else speed_mps, obstacles)
-        escape = self._escape_waypoint(pose, goal, target is not None, circles, obstacles, t)
+        set_point = isinstance(reference, SetPoint)
+        escape = self._escape_waypoint(pose, goal, set_point, target is not None, circles, obstacles, t)
         if escape is not None:
             target = [escape.x_m, escape.y_m, escape.heading_rad]
             return np.tile(target, (base.horizon + 1, 1)), np.zeros((base.horizon, 2)), True
@@ -169,6 +169,7 @@ class HuskyCBFController:
         self,
         pose: np.ndarray,
         goal: np.ndarray,
+        set_point: bool,
         evading: bool,
         circles: np.ndarray,
         obstacles: Sequence[Obstacle],
@@ -177,7 +178,7 @@ class HuskyCBFController:
         """The deadlock escape's waypoint (escape.py), or None. Not while stepping aside from a
         mover: that robot leaves its way on purpose."""
         escape = self.config.escape
-        if not escape.enabled or not (escape.on_trajectories or self._set_point):
+        if not escape.enabled or not (escape.on_trajectories or set_point):
             return None
         if evading:
             self._escape.pause()
@@ -313,7 +314,6 @@ class HuskyCBFController:
             return self._brake(
                 np.full(3, np.nan), n_real, len(obstacles) - n_real, start, "invalid state", False
             )
-        self._set_point = isinstance(reference, SetPoint)
         turn = self._measured_turn(pose)
         estimate = self._pose_filter.update(pose, self._predicted_speed, self._predicted_turn / base.tau_s)
         if turn is not None:
