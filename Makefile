@@ -21,7 +21,7 @@ $(STAMP): pyproject.toml constraints.txt
 test: $(STAMP)
 	$(BIN)/ruff check .
 	$(MAKE) docs
-	$(BIN)/python -m pytest -n auto -q
+	HUSKY_SIM_ALL_EXTRAS=1 $(BIN)/python -m pytest -n auto -q
 
 # The documentation site (MkDocs, docs/ -> site/); --strict: a broken link or API reference fails.
 docs: $(STAMP)

@@ -4,7 +4,6 @@ This package never imports the simulator; a simulator uses `Controller` from `in
 """
 
 from controllers.config import (
-    CONTROLLER_NAMES,
     HUSKY_EXPERIMENT,
     SAFETY_CONSTRAINTS,
     ConfigError,
@@ -18,7 +17,6 @@ from controllers.obstacles import Obstacle
 from controllers.references import CircleTrajectory, Reference, SetPoint, Trajectory
 
 __all__ = [
-    "CONTROLLER_NAMES",
     "HUSKY_EXPERIMENT",
     "SAFETY_CONSTRAINTS",
     "CircleTrajectory",

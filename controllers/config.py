@@ -19,9 +19,6 @@ SafetyConstraint = Literal["none", "bt", "cbf", "relax-cbf"]
 #: Obstacle constraint variants, in the order the paper compares them (plus the unconstrained baseline).
 SAFETY_CONSTRAINTS: tuple[SafetyConstraint, ...] = ("none", "bt", "cbf", "relax-cbf")
 
-#: Every controller a simulator may choose: the paper's variants and ours (controllers.husky_cbf).
-CONTROLLER_NAMES: tuple[str, ...] = (*SAFETY_CONSTRAINTS, "husky-cbf")
-
 SolverBackend = Literal["fatrop", "ipopt", "opti"]
 #: NLP solvers (controllers.backends): structured FATROP (default), reference IPOPT, naive Opti.
 SOLVER_BACKENDS: tuple[SolverBackend, ...] = ("fatrop", "ipopt", "opti")

@@ -20,7 +20,7 @@ ALLOWED = {
     "calibration": {"sim"},
     "cli": {"sim", "runs", "viz", "study", "realcheck", "bench", "ros2", "calibration"},
 }
-SHARED = {"interrupts", "paths", "scenario_file"}  # the top-level modules every layer may use
+SHARED = {"extras", "interrupts", "paths", "scenario_file"}  # the top-level modules every layer may use
 
 
 def _imported_modules(path: Path) -> set[str]:

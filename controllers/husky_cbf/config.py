@@ -10,9 +10,10 @@ the identified response in the scenario file, never from literals in code.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, field
 
 from controllers.config import ConfigError, NMPCConfig
+from controllers.settings import check_ranges, setting
 
 
 def _positive(name: str, value: float) -> None:
@@ -84,48 +85,6 @@ class Footprint:
     def __post_init__(self) -> None:
         _positive("footprint.half_length_m", self.half_length_m)
         _positive("footprint.half_width_m", self.half_width_m)
-
-
-@dataclass(frozen=True)
-class Range:
-    """The values a setting may take: [lo, hi] ((lo, hi] when lo_open), in `unit`; a tuple
-    setting's every entry."""
-
-    lo: float
-    hi: float
-    unit: str = ""
-    lo_open: bool = False
-    integer: bool = False
-
-    def contains(self, value: float) -> bool:
-        if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
-            return False
-        if self.integer and not isinstance(value, int):
-            return False
-        return (value > self.lo if self.lo_open else value >= self.lo) and value <= self.hi
-
-    def text(self) -> str:
-        unit = f" {self.unit}" if self.unit else ""
-        return f"{'(' if self.lo_open else '['}{self.lo:g}, {self.hi:g}]{unit}"
-
-
-def setting(default: object, lo: float, hi: float, unit: str = "", *, lo_open: bool = False) -> object:
-    """A tunable setting: its default and its allowed range, checked when the config is made
-    (check_ranges) and shown by the scenario schema (`controller.husky_cbf`)."""
-    integer = isinstance(default, int) and not isinstance(default, bool)
-    return field(default=default, metadata={"range": Range(lo, hi, unit, lo_open, integer)})
-
-
-def check_ranges(config: object, prefix: str) -> None:
-    """ConfigError naming the first setting of `config` (a dataclass) outside its Range."""
-    for f in fields(config):
-        allowed = f.metadata.get("range")
-        if allowed is None:
-            continue
-        value = getattr(config, f.name)
-        values = value if isinstance(value, tuple) else (value,)
-        if not all(allowed.contains(v) for v in values):
-            raise ConfigError(f"{prefix}{f.name}: must be in {allowed.text()}, got {value}")
 
 
 @dataclass(frozen=True)

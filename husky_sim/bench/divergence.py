@@ -18,7 +18,7 @@ from dataclasses import dataclass, replace
 import casadi as ca
 import numpy as np
 
-from controllers import ControlResult, NMPCConfig, NMPCController
+from controllers import ControlResult, NMPCConfig, NMPCController, registry
 from controllers.ocp import Plan, layout_for, paper_nlp
 from husky_sim.bench.solvers import REFERENCE, converged_solver
 from husky_sim.runs.scenario import Scenario
@@ -106,7 +106,7 @@ def trace_divergence(scenario: Scenario, controller: str) -> Divergence:
     """Both loops of the resolved scenario (overrides applied) with one of the paper's controllers."""
     config, ipopt, _ = _loop(scenario, controller, REFERENCE)
     _, fatrop, fatrop_problems = _loop(scenario, controller, "fatrop")
-    gamma = "" if controller == "bt" else f" gamma={config.gamma:g}"  # BT has no decay rate
+    gamma = f" gamma={config.gamma:g}" if registry.entry(controller).decay_rate else ""  # BT has none
     label = f"{scenario.name} {controller} N={config.horizon}{gamma}"
     rows = list(zip(ipopt.rows, fatrop.rows, strict=False))
     poses_part = next(

@@ -13,6 +13,7 @@ import argparse
 import atexit
 import os
 import sys
+import warnings
 from collections.abc import Sequence
 
 from husky_sim import interrupts
@@ -30,9 +31,10 @@ from husky_sim.cli import (
     scenarios,
     suite,
 )
-from husky_sim.cli.common import CONTROLLER_CHOICES, SOLVER_CHOICES, OneLineErrorParser, UsageError
+from husky_sim.cli.common import SOLVER_CHOICES, OneLineErrorParser, UsageError, warn
+from husky_sim.extras import MissingExtra
 
-__all__ = ["CONTROLLER_CHOICES", "SOLVER_CHOICES", "UsageError", "build_parser", "entry", "main"]
+__all__ = ["SOLVER_CHOICES", "UsageError", "build_parser", "entry", "main"]
 
 #: The commands in the order `husky-sim --help` lists them.
 COMMANDS = (scenarios, run, ros2, render, suite, paper, bench, check, plot, identify, replay, calibrate)
@@ -58,9 +60,15 @@ def main(argv: Sequence[str] | None = None) -> int:
     (a caller that runs it in-process keeps its own)."""
     previous = interrupts.install()  # first: an interrupt during start-up is honoured too
     try:
-        return _run_command(argv)
+        with warnings.catch_warnings():  # a library's UserWarning (no run.mcap) as one line
+            warnings.showwarning = _show_warning
+            return _run_command(argv)
     finally:
         interrupts.restore(previous)
+
+
+def _show_warning(message: Warning | str, *_: object, **__: object) -> None:
+    warn(str(message))
 
 
 def _run_command(argv: Sequence[str] | None) -> int:
@@ -91,6 +99,9 @@ def _error(exc: Exception) -> int:
     if isinstance(exc, UsageError | ValueError):  # ConfigError and ScenarioError are ValueErrors
         print(f"husky-sim: error: {_one_line(exc)}", file=sys.stderr)
         return 2
+    if isinstance(exc, MissingExtra):  # the install, not the user: which extra to add
+        print(f"husky-sim: error: {_one_line(exc)}", file=sys.stderr)
+        return 1
     if isinstance(exc, BrokenPipeError):  # `husky-sim scenarios | head`: the reader left
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 1

@@ -6,9 +6,9 @@ from __future__ import annotations
 import argparse
 
 from husky_sim.cli.common import (
-    CONTROLLER_CHOICES,
     HORIZON_HELP,
     SOLVER_CHOICES,
+    controller_choices,
     count_arg,
     horizon_arg,
     number_in,
@@ -75,7 +75,9 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     )
     bench.add_argument("--json", action="store_true", help="print JSON records instead of a table")
     bench.add_argument("--steps", type=count_arg, default=150, help="control steps per cell (default 150)")
-    paper = CONTROLLER_CHOICES[:4]  # the bench times the paper's OCP (husky-cbf: `run` reports its times)
+    paper = controller_choices(
+        paper_only=True
+    )  # the bench times the paper's OCP (husky-cbf: `run` reports its times)
     bench.add_argument(
         "--controllers", nargs="+", choices=paper, default=list(paper), help="the paper's (default: all four)"
     )
@@ -116,7 +118,9 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
         "different local optimum",
     )
     divergence.add_argument("scenario", help="a scenario YAML path or the name of a shipped scenario")
-    divergence.add_argument("--controller", choices=CONTROLLER_CHOICES[1:4], default="cbf")
+    divergence.add_argument(
+        "--controller", choices=controller_choices(paper_only=True, with_baseline=False), default="cbf"
+    )
     divergence.add_argument("--horizon", type=horizon_arg, default=None, help=HORIZON_HELP)
     divergence.add_argument("--gamma", type=unit_float_arg, default=None, help="CBF decay rate in [0, 1]")
     divergence.set_defaults(func=cmd_bench_divergence)

@@ -6,10 +6,11 @@ import argparse
 
 from husky_sim import interrupts
 from husky_sim.cli.common import (
-    CONTROLLER_CHOICES,
     add_backend_args,
     add_solver_arg,
+    controller_choices,
     count_arg,
+    default_controller,
     horizon_arg,
     jobs_arg,
     path_arg,
@@ -61,7 +62,7 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     """Register `check`."""
     check = sub.add_parser("check", help="sim-to-real checks before a Husky trial: audit + robustness sweep")
     check.add_argument("scenario", help="a scenario YAML path or the name of a shipped scenario")
-    check.add_argument("--controller", choices=CONTROLLER_CHOICES, default="relax-cbf")
+    check.add_argument("--controller", choices=controller_choices(), default=default_controller())
     check.add_argument(
         "--horizon", type=horizon_arg, default=None, help="prediction steps N (default: the file's)"
     )

@@ -9,9 +9,23 @@ import sys
 
 from husky_sim.sim.specs import HUSKY_SPEC_SHEET
 
-#: The controllers a command may choose (controllers.CONTROLLER_NAMES, without importing CasADi
-#: before the signal handlers are in place; a test keeps the two equal).
-CONTROLLER_CHOICES = ("none", "bt", "cbf", "relax-cbf", "husky-cbf")
+
+def controller_choices(paper_only: bool = False, with_baseline: bool = True) -> tuple[str, ...]:
+    """The controllers a command may choose: every registered one (controllers.registry), or the
+    paper's. Read when the parser is built, after the signal handlers are in place (the registry
+    imports the controllers, and with them CasADi)."""
+    from controllers import registry
+
+    return registry.paper_names(with_baseline) if paper_only else registry.names()
+
+
+def default_controller(on_robot: bool = False) -> str:
+    """The controller a command runs unless told (controllers.registry's defaults)."""
+    from controllers import registry
+
+    return registry.DEFAULT_ON_ROBOT if on_robot else registry.DEFAULT
+
+
 #: The NLP solver backends (controllers.config.SOLVER_BACKENDS, likewise kept equal by a test).
 SOLVER_CHOICES = ("fatrop", "ipopt", "opti")
 #: Those a run can use for every controller (a scenario's controller.solver, likewise kept equal by

@@ -7,11 +7,12 @@ import argparse
 
 from husky_sim import interrupts
 from husky_sim.cli.common import (
-    CONTROLLER_CHOICES,
     HORIZON_HELP,
     UsageError,
     add_live_argument,
     announce_live,
+    controller_choices,
+    default_controller,
     horizon_arg,
     number_in,
     path_arg,
@@ -183,7 +184,9 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     serve.add_argument(
         "scenario", help="a scenario YAML path or shipped name: the controller's parameters and reference"
     )
-    serve.add_argument("--controller", choices=CONTROLLER_CHOICES, default="husky-cbf")
+    serve.add_argument(
+        "--controller", choices=controller_choices(), default=default_controller(on_robot=True)
+    )
     serve.add_argument("--horizon", type=horizon_arg, default=None, help=HORIZON_HELP)
     serve.add_argument("--gamma", type=unit_float_arg, default=None, help="CBF decay rate in [0, 1]")
     serve.add_argument(
@@ -213,7 +216,9 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
         "rehearse", help="drive the PyBullet Husky from a `serve` node in another process, over DDS"
     )
     rehearse.add_argument("scenario", help="a scenario YAML path or the name of a shipped scenario")
-    rehearse.add_argument("--controller", choices=CONTROLLER_CHOICES, default="husky-cbf")
+    rehearse.add_argument(
+        "--controller", choices=controller_choices(), default=default_controller(on_robot=True)
+    )
     rehearse.add_argument("--horizon", type=horizon_arg, default=None, help=HORIZON_HELP)
     rehearse.add_argument("--gamma", type=unit_float_arg, default=None, help="CBF decay rate in [0, 1]")
     rehearse.add_argument("--seed", type=seed_arg, default=None, help="noise and random-field seed")

@@ -6,11 +6,12 @@ import argparse
 
 from husky_sim import interrupts
 from husky_sim.cli.common import (
-    CONTROLLER_CHOICES,
     HORIZON_HELP,
     add_live_argument,
     add_solver_arg,
     announce_live,
+    controller_choices,
+    default_controller,
     horizon_arg,
     path_arg,
     seed_arg,
@@ -57,7 +58,7 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     """Register `run`."""
     run = sub.add_parser("run", help="run one scenario in PyBullet; writes summary.json and log.csv")
     run.add_argument("scenario", help="a scenario YAML path or the name of a shipped scenario")
-    run.add_argument("--controller", choices=CONTROLLER_CHOICES, default="relax-cbf")
+    run.add_argument("--controller", choices=controller_choices(), default=default_controller())
     run.add_argument("--horizon", type=horizon_arg, default=None, help=HORIZON_HELP)
     run.add_argument("--gamma", type=unit_float_arg, default=None, help="CBF decay rate in [0, 1]")
     run.add_argument("--seed", type=seed_arg, default=None, help="noise and random-field seed")

@@ -7,10 +7,10 @@ import sys
 
 from husky_sim import interrupts
 from husky_sim.cli.common import (
-    CONTROLLER_CHOICES,
     UsageError,
     add_backend_args,
     add_solver_arg,
+    controller_choices,
     horizon_arg,
     jobs_arg,
     path_arg,
@@ -74,7 +74,10 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     suite = sub.add_parser("suite", help="run a scenario x controller x horizon x gamma matrix in parallel")
     suite.add_argument("--scenarios", nargs="+", default=None, help="names or paths (default: all shipped)")
     suite.add_argument(
-        "--controllers", nargs="+", choices=CONTROLLER_CHOICES, default=["bt", "cbf", "relax-cbf"]
+        "--controllers",
+        nargs="+",
+        choices=controller_choices(),
+        default=list(controller_choices(paper_only=True, with_baseline=False)),
     )
     suite.add_argument("--horizons", nargs="+", type=horizon_arg, default=None, help="default: file's N")
     suite.add_argument("--gammas", nargs="+", type=unit_float_arg, default=None, help="default: file's gamma")

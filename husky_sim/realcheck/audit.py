@@ -28,6 +28,8 @@ from typing import Literal
 
 import numpy as np
 
+from controllers import registry
+from controllers.registry import BodyDiscs, PlanProfile
 from husky_sim.runs.scenario import Scenario
 from husky_sim.sim import specs as specs
 from husky_sim.sim.drive import DriveConfig
@@ -206,53 +208,48 @@ def check_acceleration(scenario: Scenario) -> Finding:
     return Finding("acceleration", "pass", text, values)
 
 
-# -- husky-cbf: a body of discs, accelerations and braking in its model ----------------------------
-def check_body_discs(scenario: Scenario, t: AuditThresholds) -> Finding:
-    """husky-cbf: the discs that cover the URDF footprint and their margin, against the noise."""
-    from controllers.husky_cbf.footprint import disc_cover
-
-    cfg = scenario.husky_cbf_config()
-    centres, radius = disc_cover(cfg.footprint, cfg.disc_excess_m)
+# -- a controller that models its body as discs, its accelerations and its braking (husky-cbf) ------
+def check_body_discs(scenario: Scenario, name: str, body: BodyDiscs, t: AuditThresholds) -> Finding:
+    """The discs that cover the URDF footprint in the controller's model and their margin,
+    against the noise."""
     needed = needed_margin_m(scenario, t)
-    f = cfg.footprint
+    length, width = (2 * h for h in body.footprint_half_extents_m)
     values = {
-        "discs": len(centres),
-        "disc_radius_m": radius,
-        "footprint_m": [2 * f.half_length_m, 2 * f.half_width_m],
-        "margin_m": cfg.margin_m,
+        "discs": body.count,
+        "disc_radius_m": body.radius_m,
+        "footprint_m": [length, width],
+        "margin_m": body.margin_m,
         "needed_margin_m": needed,
     }
     text = (
-        f"husky-cbf: {len(centres)} discs of {radius:.3f} m along the body cover the URDF "
-        f"footprint {2 * f.half_length_m:.3f} x {2 * f.half_width_m:.3f} m, each kept "
-        f"{cfg.margin_m:.3f} m off obstacles"
+        f"{name}: {body.count} discs of {body.radius_m:.3f} m along the body cover the URDF "
+        f"footprint {length:.3f} x {width:.3f} m, each kept {body.margin_m:.3f} m off obstacles"
     )
-    if cfg.margin_m < needed:
+    if body.margin_m < needed:
         return _thin_margin(text, needed, t, values)
     return Finding("robot radius", "pass", f"{text}, >= needed {needed:.3f} m", values)
 
 
-def check_planned_acceleration(scenario: Scenario) -> Finding:
-    """husky-cbf: its plans' accelerations are bounded in the model; against the drive's."""
-    resp, drive = scenario.husky_cbf_config().response, drive_config(scenario)
+def check_planned_acceleration(scenario: Scenario, name: str, accel: tuple[float, float]) -> Finding:
+    """The accelerations (m/s^2, rad/s^2) the controller's plans are bounded to in its model,
+    against the drive's."""
+    drive = drive_config(scenario)
+    linear, angular = accel
     a_pub, alpha_pub = specs.LINEAR_MAX_ACCELERATION_MPS2, specs.ANGULAR_MAX_ACCELERATION_RADPS2
     values = {
-        "planned_linear_accel_mps2": resp.max_linear_accel_mps2,
-        "planned_angular_accel_radps2": resp.max_angular_accel_radps2,
+        "planned_linear_accel_mps2": linear,
+        "planned_angular_accel_radps2": angular,
         "drive_linear_accel_mps2": drive.max_linear_accel_mps2,
         "drive_angular_accel_radps2": drive.max_angular_accel_radps2,
         "published_linear_accel_mps2": a_pub,
         "published_angular_accel_radps2": alpha_pub,
     }
     text = (
-        f"husky-cbf plans within {resp.max_linear_accel_mps2:g} m/s^2, {resp.max_angular_accel_radps2:g} "
-        f"rad/s^2 vs drive {drive.max_linear_accel_mps2:g} m/s^2, {drive.max_angular_accel_radps2:g} rad/s^2 "
+        f"{name} plans within {linear:g} m/s^2, {angular:g} rad/s^2 vs drive "
+        f"{drive.max_linear_accel_mps2:g} m/s^2, {drive.max_angular_accel_radps2:g} rad/s^2 "
         f"(published ROS 1 {a_pub:g} / {alpha_pub:g})"
     )
-    if (
-        resp.max_linear_accel_mps2 > drive.max_linear_accel_mps2 + 1e-9
-        or resp.max_angular_accel_radps2 > drive.max_angular_accel_radps2 + 1e-9
-    ):
+    if linear > drive.max_linear_accel_mps2 + 1e-9 or angular > drive.max_angular_accel_radps2 + 1e-9:
         return Finding(
             "acceleration", "warn", f"{text}: it plans accelerations the drive cannot make", values
         )
@@ -263,14 +260,15 @@ def check_planned_acceleration(scenario: Scenario) -> Finding:
     return Finding("acceleration", "pass", text, values)
 
 
-def check_planned_stopping(scenario: Scenario) -> Finding:
-    """husky-cbf: braking is in its plan (v^2 / 2a kept free at the horizon's end), and so is the
-    drive's dead time it is told of; the latency, which it does not know of, and any dead time
-    beyond its own can carry the robot past a planned stop."""
-    cfg = scenario.husky_cbf_config()
+def check_planned_stopping(scenario: Scenario, name: str, plan: PlanProfile) -> Finding:
+    """Braking is in the controller's plan (husky-cbf keeps v^2 / 2a free at the horizon's end),
+    and so is the drive's dead time it is told of; the latency, which it does not know of, and any
+    dead time beyond its own can carry the robot past a planned stop."""
+    assert plan.body is not None and plan.planned_dead_time_s is not None
+    margin = plan.body.margin_m
     reaction, latency, braking = stopping_distance_m(scenario)
     dead_time = dead_time_m(scenario)
-    planned_dead_time = scenario.controller.v_max_mps * cfg.response.command_delay_s
+    planned_dead_time = scenario.controller.v_max_mps * plan.planned_dead_time_s
     unplanned = latency + max(dead_time - planned_dead_time, 0.0)
     values = {
         "reaction_m": reaction,
@@ -280,15 +278,15 @@ def check_planned_stopping(scenario: Scenario) -> Finding:
         "braking_m": braking,
         "stopping_m": reaction + latency + dead_time + braking,
         "unplanned_overrun_m": unplanned,
-        "margin_m": cfg.margin_m,
+        "margin_m": margin,
     }
     text = (
         f"stop from v_max {scenario.controller.v_max_mps:g} m/s: {values['stopping_m']:.3f} m "
         f"({reaction:.3f} m over tau + {latency:.3f} m latency + {dead_time:.3f} m drive dead time + "
-        f"{braking:.3f} m braking; husky-cbf plans the braking and {planned_dead_time:.3f} m of dead "
-        f"time); beyond the plan {unplanned:.3f} m vs disc margin {cfg.margin_m:.3f} m"
+        f"{braking:.3f} m braking; {name} plans the braking and {planned_dead_time:.3f} m of dead "
+        f"time); beyond the plan {unplanned:.3f} m vs disc margin {margin:.3f} m"
     )
-    if unplanned > cfg.margin_m:
+    if unplanned > margin:
         return Finding(
             "stopping distance",
             "warn",
@@ -447,28 +445,27 @@ def audit(
     scenario: Scenario,
     solve_times_s: Sequence[float],
     thresholds: AuditThresholds | None = None,
-    controller: str = "relax-cbf",
+    controller: str = registry.DEFAULT,
 ) -> list[Finding]:
     """Every finding for a scenario (its controller already set to the horizon under test), given
-    solve times measured for it (measure_solve_times); husky-cbf's body, accelerations and
-    braking are its own (a body of discs, both in its model), the paper's controllers' the
-    scenario's circle and an unconstrained step."""
+    solve times measured for it (measure_solve_times). What the controller's plans promise
+    (its registry entry's PlanProfile) decides which checks apply: a body of discs, or the
+    scenario's circle; accelerations and braking in its model, or an unconstrained step and an
+    instant stop (the paper's unicycle)."""
     t = thresholds or AuditThresholds()
-    if controller == "husky-cbf":
-        return [
-            check_body_discs(scenario, t),
-            check_velocity_limits(scenario, scenario.husky_cbf_config().omega_cmd_max_radps),
-            check_planned_acceleration(scenario),
-            check_planned_stopping(scenario),
-            check_timing(scenario.tau_s, solve_times_s, t),
-            check_obstacles(scenario),
-            check_sensing(scenario),
-        ]
+    plan = scenario.plan_profile(controller)
+    planned_stop = plan.body is not None and plan.planned_dead_time_s is not None
     return [
-        check_robot_radius(scenario, t),
-        check_velocity_limits(scenario),
-        check_acceleration(scenario),
-        check_stopping_distance(scenario),
+        check_robot_radius(scenario, t)
+        if plan.body is None
+        else check_body_discs(scenario, controller, plan.body, t),
+        check_velocity_limits(scenario, plan.omega_cmd_max_radps),
+        check_acceleration(scenario)
+        if plan.planned_accel is None
+        else check_planned_acceleration(scenario, controller, plan.planned_accel),
+        check_planned_stopping(scenario, controller, plan)
+        if planned_stop
+        else check_stopping_distance(scenario),
         check_timing(scenario.tau_s, solve_times_s, t),
         check_obstacles(scenario),
         check_sensing(scenario),

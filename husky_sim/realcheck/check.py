@@ -27,7 +27,7 @@ from typing import Any
 
 import numpy as np
 
-from controllers import CONTROLLER_NAMES
+from controllers import registry
 from husky_sim.realcheck.audit import AuditThresholds, Finding, audit, measure_solve_times
 from husky_sim.realcheck.steerability import CAN_PIVOT_RADPS, failure_class
 from husky_sim.realcheck.sweep import (
@@ -53,7 +53,7 @@ PAYLOAD_BINS = 5  # bars of the pass-rate-by-payload figure
 class CheckOptions:
     """What to check and how; validated on construction (a bad value is a one-line ValueError)."""
 
-    controller: str = "relax-cbf"  # controllers.CONTROLLER_NAMES
+    controller: str = registry.DEFAULT  # a registered controller (controllers.registry)
     horizon: int | None = None  # None: the scenario's
     samples: int = 32  # K perturbed runs
     seed: int | None = None  # perturbation sampling seed; None: the scenario's seed
@@ -66,8 +66,7 @@ class CheckOptions:
     thresholds: AuditThresholds = field(default_factory=AuditThresholds)
 
     def __post_init__(self) -> None:
-        if self.controller not in CONTROLLER_NAMES:
-            raise ValueError(f"controller: must be one of {CONTROLLER_NAMES}, got {self.controller!r}")
+        registry.entry(self.controller)  # ValueError naming the registered ones
         for name in ("samples", "timing_solves"):
             if getattr(self, name) < 1:
                 raise ValueError(f"{name}: must be >= 1, got {getattr(self, name)}")

@@ -41,6 +41,7 @@ from pathlib import Path
 import numpy as np
 
 from controllers.model import wrap_angle
+from husky_sim.extras import require
 from husky_sim.sim.drive import DriveConfig, SkidSteerDrive
 from husky_sim.sim.ground import Ground, load_ground, with_friction
 from husky_sim.sim.open_loop import held_commands, simulate_commands
@@ -226,7 +227,7 @@ def _topic_connections(reader: object, source: str, topic: str, types: Sequence[
 
 
 def _read_bag_messages(path: Path, source: str, cmd_topic: str, odom_topic: str) -> Recording:
-    from rosbags.highlevel import AnyReader
+    AnyReader = require("rosbags.highlevel", "ros2", "replaying a ROS bag").AnyReader  # noqa: N806
 
     cmd_t, cmds, pose_t, poses, yaw_rates = [], [], [], [], []
     with AnyReader([path]) as reader:

@@ -26,16 +26,20 @@ from __future__ import annotations
 import os
 from typing import Any
 
-from cyclonedds.core import InstanceState, Policy, Qos, ReadCondition, SampleState, ViewState, WaitSet
-from cyclonedds.domain import Domain, DomainParticipant
-from cyclonedds.pub import DataWriter
-from cyclonedds.sub import DataReader
-from cyclonedds.topic import Topic
-from cyclonedds.util import duration
-
+from husky_sim.extras import missing
 from husky_sim.ros2 import messages as msg
 from husky_sim.ros2.settings import QOS_PROFILE_NAMES, Ros2Settings
 from husky_sim.ros2.transport import Received, TopicsBySetting
+
+try:
+    from cyclonedds.core import InstanceState, Policy, Qos, ReadCondition, SampleState, ViewState, WaitSet
+    from cyclonedds.domain import Domain, DomainParticipant
+    from cyclonedds.pub import DataWriter
+    from cyclonedds.sub import DataReader
+    from cyclonedds.topic import Topic
+    from cyclonedds.util import duration
+except ImportError:  # the core install has no DDS binding
+    raise missing("cyclonedds", "ros2", "the Cyclone DDS transport (serve, rehearse)") from None
 
 _XCDR1 = Policy.DataRepresentation(use_cdrv0_representation=True)
 

@@ -22,11 +22,15 @@ import types
 from collections.abc import Callable
 from typing import Any
 
-from cyclonedds.idl import IdlStruct
-from cyclonedds.idl import annotations as idl_annotations
-from cyclonedds.idl import types as idl
-
+from husky_sim.extras import missing, require
 from husky_sim.ros2.settings import ROS_DISTRO_NAMES
+
+try:
+    from cyclonedds.idl import IdlStruct
+    from cyclonedds.idl import annotations as idl_annotations
+    from cyclonedds.idl import types as idl
+except ImportError:  # the core install has no DDS binding
+    raise missing("cyclonedds", "ros2", "ROS 2's messages (serve, rehearse)") from None
 
 #: Each distribution's rosbags.typesys.Stores member; the first is the default (Humble:
 #: Clearpath's A200 stack).
@@ -53,7 +57,10 @@ _PRIMITIVES: dict[str, Any] = {
 
 @functools.cache
 def _typestore(distro: str):
-    from rosbags.typesys import Stores, get_typestore
+    Stores, get_typestore = (
+        getattr(require("rosbags.typesys", "ros2", "ROS 2's message types"), name)
+        for name in ("Stores", "get_typestore")
+    )
 
     return get_typestore(getattr(Stores, ROS_DISTROS[distro]))
 

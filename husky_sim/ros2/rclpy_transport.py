@@ -20,6 +20,7 @@ from collections.abc import Sequence
 from dataclasses import fields, replace
 from typing import Any
 
+from husky_sim.extras import MissingExtra
 from husky_sim.ros2.messages import MessageKit
 from husky_sim.ros2.settings import QOS_PROFILE_NAMES, Ros2Settings
 from husky_sim.ros2.transport import Received, TopicsBySetting
@@ -114,9 +115,9 @@ class RclpyTransport(TopicsBySetting):
             from rclpy.parameter import Parameter
             from rclpy.signals import SignalHandlerOptions
         except ImportError as exc:
-            raise ValueError(
+            raise MissingExtra(
                 f"--transport rclpy: ROS 2's rclpy is not importable here ({exc}); source a ROS 2 "
-                'install, or `pip install -c constraints.txt -e ".[ros2]"`'
+                "install, or pip install 'husky-nav-sim[rclpy]'"
             ) from None
         if settings.localhost_only:  # ROS 2's own switch (Jazzy on): discovery on this machine only
             os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"

@@ -20,11 +20,16 @@ import math
 from collections.abc import Sequence
 from pathlib import Path
 
-import foxglove
 import numpy as np
-from foxglove import messages as fm
 
 from controllers import ControlResult, Reference, SetPoint
+from husky_sim.extras import missing
+
+try:
+    import foxglove
+    from foxglove import messages as fm
+except ImportError:  # the core install has no Foxglove SDK
+    raise missing("foxglove", "foxglove", "run.mcap and --live") from None
 from husky_sim.sim.step_log import LOG_COLUMNS
 
 #: The file a run folder's recording is written to.

@@ -21,6 +21,7 @@ from concurrent.futures import Future, ProcessPoolExecutor, as_completed
 from typing import Literal, TypeVar
 
 from husky_sim import interrupts
+from husky_sim.extras import missing
 
 T = TypeVar("T")
 R = TypeVar("R")
@@ -116,9 +117,7 @@ def dask_map(
     try:
         from distributed import Client, LocalCluster, as_completed
     except ImportError:
-        raise ValueError(
-            "backend: dask needs Dask distributed: pip install 'husky-nav-sim[cluster]'"
-        ) from None
+        raise missing("distributed", "cluster", "backend dask") from None
     results: list[R | BaseException | None] = [None] * len(items)
     cluster = None
     if scheduler is None:

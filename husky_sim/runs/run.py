@@ -3,18 +3,23 @@
 from __future__ import annotations
 
 import signal
+import warnings
 from dataclasses import asdict
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-from controllers import SAFETY_CONSTRAINTS, Controller, NMPCController, Reference, SafetyConstraint
+from controllers import Controller, Reference, registry
 from husky_sim import interrupts
+from husky_sim.extras import MissingExtra
 from husky_sim.interrupts import RunInterrupted
-from husky_sim.runs.foxglove_record import MCAP_NAME, FoxgloveRecorder
 from husky_sim.runs.run_folder import LOG_FILE, TRACE_FILE, prepare_out_dir, write_summary
 from husky_sim.runs.scenario import Scenario, load_scenario
 from husky_sim.runs.summary import KinematicMetrics, Model, RunSettings, RunSummary
 from husky_sim.sim.episode import run_episode
 from husky_sim.sim.geometry import load_geometry
+
+if TYPE_CHECKING:
+    from husky_sim.runs.foxglove_record import FoxgloveRecorder
 
 
 def resolved(
@@ -35,12 +40,8 @@ def resolved(
 def run_settings(sc: Scenario, controller: str, model: Model = "physics") -> tuple[RunSettings, float]:
     """Which controller runs on the resolved scenario with which settings (building the controller
     is not needed), and the controller's robot circle (m)."""
-    if controller == "husky-cbf":
-        full = sc.husky_cbf_config()
-        nmpc_config, omega_max = full.nmpc, full.omega_cmd_max_radps
-    else:
-        nmpc_config = sc.controller_config(controller)
-        omega_max = nmpc_config.omega_max_radps
+    plan = sc.plan_profile(controller)
+    nmpc_config, omega_max = plan.nmpc, plan.omega_cmd_max_radps
     settings = RunSettings(
         scenario=sc.name,
         controller=controller,
@@ -60,7 +61,7 @@ def run_settings(sc: Scenario, controller: str, model: Model = "physics") -> tup
 
 def run_scenario(
     scenario: Scenario | str,
-    controller: SafetyConstraint,
+    controller: str,
     horizon: int | None = None,
     gamma: float | None = None,
     seed: int | None = None,
@@ -118,8 +119,16 @@ def _recorder(
     sc: Scenario, reference: Reference, out_dir: Path | None, live_port: int | None
 ) -> FoxgloveRecorder | None:
     """The run's Foxglove recorder (run.mcap in out_dir, and live on live_port), or None when
-    neither is asked for."""
+    neither is asked for, or when only run.mcap is and the Foxglove SDK (the `foxglove` extra) is
+    not installed: then the run folder has no run.mcap, and a warning says why."""
     if out_dir is None and live_port is None:
+        return None
+    try:
+        from husky_sim.runs.foxglove_record import MCAP_NAME, FoxgloveRecorder
+    except MissingExtra as exc:
+        if live_port is not None:
+            raise
+        warnings.warn(f"no run.mcap: {exc}", stacklevel=2)
         return None
     specs = sc.obstacle_specs()
     path = out_dir / MCAP_NAME if out_dir is not None else None
@@ -137,7 +146,7 @@ def _recorder(
 
 def run_scenario_kinematic(
     scenario: Scenario | str,
-    controller: SafetyConstraint,
+    controller: str,
     horizon: int | None = None,
     gamma: float | None = None,
     robot_radius_m: float | None = None,
@@ -166,8 +175,10 @@ def run_scenario_kinematic(
     from husky_sim.sim.outcomes import final_outcome, reference_reachable
 
     sc = resolved(scenario, horizon, gamma)
-    if controller not in SAFETY_CONSTRAINTS:
-        raise ValueError(f"controller: the kinematic loop runs {SAFETY_CONSTRAINTS}, got {controller!r}")
+    entry = registry.entry(controller)
+    if not entry.paper:
+        paper = ", ".join(registry.paper_names())
+        raise ValueError(f"controller: the kinematic loop runs the paper's ({paper}), got {controller!r}")
     config = sc.controller_config(controller)
     if robot_radius_m is not None:
         config = replace(config, robot_radius_m=robot_radius_m)
@@ -175,7 +186,7 @@ def run_scenario_kinematic(
     obstacles, reference = problem.obstacles, problem.reference
     outcomes = sc.episode_config().outcomes
     ep = run_kinematic(
-        NMPCController(config),
+        entry.build(config),
         problem.start,
         reference,
         obstacles,

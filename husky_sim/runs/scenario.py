@@ -23,11 +23,19 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Annotated, Any, Literal
 
 import numpy as np
-from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, ValidationError, model_validator
+from pydantic import (
+    BaseModel,
+    BeforeValidator,
+    ConfigDict,
+    Field,
+    ValidationError,
+    create_model,
+    model_validator,
+)
 
-from controllers import NMPCConfig, SafetyConstraint
+from controllers import NMPCConfig
 from husky_sim.paths import SCENARIO_DIR
-from husky_sim.runs.settings_schema import HuskyCBFSettings
+from husky_sim.runs.settings_schema import settings_fields
 from husky_sim.scenario_file import ScenarioFileError, read_scenario_data
 from husky_sim.sim.drive import DriveConfig
 from husky_sim.sim.episode import EpisodeConfig
@@ -42,7 +50,7 @@ from husky_sim.sim.yaw_response import GAIN_BOUNDS, TIME_CONSTANT_BOUNDS_S, YawR
 
 if TYPE_CHECKING:
     from controllers import Controller, Reference
-    from controllers.husky_cbf import HuskyCBFConfig
+    from controllers.registry import PlanProfile
 
 #: Most obstacles in one scenario (explicit plus random): each is a slot in the NLP, and solve
 #: time grows with them (7 obstacles: about 5 ms at N = 5; 1,000: 266 ms).
@@ -297,7 +305,7 @@ class RobotSpec(_Strict):
         return identified_yaw_response()
 
 
-class ControllerSpec(_Strict):
+class NMPCSpec(_Strict):
     """NMPC parameters; omitted ones take the paper's simulation defaults, NMPCConfig's own.
 
     Commanded limits may exceed the Husky's (the audit of `husky-sim check` flags that), within
@@ -317,9 +325,16 @@ class ControllerSpec(_Strict):
     obstacle_prediction: Literal["constant-velocity", "frozen"] = NMPCConfig.obstacle_prediction
     #: NLP solver (controllers.backends); omitted: the controllers' default (SolverOptions)
     solver: Literal["ipopt", "fatrop"] | None = None
-    #: husky-cbf's own settings (controllers.husky_cbf.config, with their reasons); omitted ones
-    #: keep their defaults; the paper's controllers ignore them
-    husky_cbf: HuskyCBFSettings | None = None
+
+
+#: The NMPC settings every controller is given (scenario_configs.nmpc_config).
+NMPC_FIELDS = tuple(NMPCSpec.model_fields)
+#: The `controller` block: the NMPC settings, and each registered controller's own settings under
+#: its name (`husky_cbf:`; controllers.registry), omitted ones keeping their defaults; a
+#: controller ignores the others'.
+ControllerSpec = create_model(
+    "ControllerSpec", __base__=NMPCSpec, __doc__=NMPCSpec.__doc__, **settings_fields()
+)
 
 
 class DriveSpec(_Strict):
@@ -500,18 +515,21 @@ class Scenario(_Strict):
 
         return scenario_configs.reference_object(self)
 
-    def controller_config(self, safety: SafetyConstraint) -> NMPCConfig:
+    def controller_config(self, name: str) -> Any:
+        """The configuration of the controller `name` (a registered one) for this scenario: the
+        paper's an NMPCConfig with its obstacle constraint, husky-cbf's a HuskyCBFConfig."""
         from husky_sim.runs import scenario_configs
 
-        return scenario_configs.controller_config(self, safety)
+        return scenario_configs.controller_config(self, name)
 
-    def husky_cbf_config(self) -> HuskyCBFConfig:
+    def plan_profile(self, name: str) -> PlanProfile:
+        """What the plans of the controller `name` promise here (controllers.registry.PlanProfile)."""
         from husky_sim.runs import scenario_configs
 
-        return scenario_configs.husky_cbf_config(self)
+        return scenario_configs.plan_profile(self, name)
 
     def make_controller(self, name: str) -> Controller:
-        """The controller called `name` (controllers.CONTROLLER_NAMES) configured for this scenario."""
+        """The controller called `name` (a registered one) configured for this scenario."""
         from husky_sim.runs import scenario_configs
 
         return scenario_configs.make_controller(self, name)

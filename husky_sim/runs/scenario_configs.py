@@ -1,4 +1,4 @@
-"""What a scenario builds: the controller's configuration (the paper's NMPC or husky-cbf), the
+"""What a scenario builds: a controller's inputs and configuration (through its registry entry), the
 PyBullet episode's configuration, the reference and the kinematic problem. The schema
 (husky_sim.runs.scenario) says what a scenario file may hold; this module says what it means to
 the controllers and the simulator."""
@@ -6,21 +6,11 @@ the controllers and the simulator."""
 from __future__ import annotations
 
 import dataclasses
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
-from controllers import (
-    CircleTrajectory,
-    Controller,
-    NMPCConfig,
-    NMPCController,
-    Reference,
-    SafetyConstraint,
-    SetPoint,
-    SolverOptions,
-)
-from controllers.husky_cbf import Footprint, HuskyCBFConfig, HuskyCBFController, RobotResponse
-from controllers.husky_cbf.config import PoseNoise
-from husky_sim.runs.settings_schema import apply_settings
+from controllers import CircleTrajectory, Controller, NMPCConfig, Reference, SetPoint, SolverOptions, registry
+from controllers.registry import ControllerInputs, PlanProfile, RobotFacts
+from husky_sim.runs.settings_schema import given_settings
 from husky_sim.sim.episode import EpisodeConfig
 from husky_sim.sim.geometry import load_geometry
 from husky_sim.sim.ground import load_ground, with_friction
@@ -63,56 +53,70 @@ def reference_object(sc: Scenario) -> Reference:
     return CircleTrajectory(c.radius_m, c.angular_rate_radps, c.center_x_m, c.center_y_m, c.phase_rad)
 
 
-def controller_config(sc: Scenario, safety: SafetyConstraint) -> NMPCConfig:
-    """The NMPC's configuration for this scenario with the obstacle constraint `safety` (N and
-    gamma are the file's: overrides are applied once, by `with_overrides`)."""
-    # ControllerSpec's fields are NMPCConfig's fields by name; `solver` names SolverOptions.backend
-    fields = sc.controller.model_dump()
-    fields.pop("husky_cbf")  # husky-cbf's own (husky_cbf_config)
+def nmpc_config(sc: Scenario) -> NMPCConfig:
+    """The scenario's NMPC settings (the paper's part, N and gamma the file's: overrides are
+    applied once, by `with_overrides`), with its robot circle and one obstacle slot per obstacle;
+    each controller sets its own obstacle constraint on it (its registry entry's `configure`)."""
+    from husky_sim.runs.scenario import NMPC_FIELDS  # the schema imports this module's callers
+
+    # the NMPC fields of ControllerSpec are NMPCConfig's by name; `solver` names SolverOptions.backend
+    fields = {name: getattr(sc.controller, name) for name in NMPC_FIELDS}
     backend = fields.pop("solver")
     if backend is not None:
         fields["solver"] = SolverOptions(backend=backend)
     return NMPCConfig(
         **fields,
         tau_s=sc.tau_s,
-        safety=safety,
         robot_radius_m=sc.robot.radius(),
         obstacle_slots=max(len(sc.obstacle_specs()), 1),
     )
 
 
-def husky_cbf_config(sc: Scenario) -> HuskyCBFConfig:
-    """husky-cbf's configuration: the file's NMPC settings (Relax-CBF), the drive's limits, the
-    robot's identified yaw response and the URDF's footprint."""
+def robot_facts(sc: Scenario) -> RobotFacts:
+    """What a controller is told of the robot: the drive's limits, the identified yaw response, the
+    URDF's footprint and the localisation's reported noise."""
     drive = sc.drive.config()
     yaw = sc.robot.yaw_response_params()
     geometry = load_geometry()
-    config = HuskyCBFConfig(
-        nmpc=controller_config(sc, "relax-cbf"),
-        response=RobotResponse(
-            drive.max_linear_accel_mps2,
-            drive.max_angular_accel_radps2,
-            yaw.gain,
-            yaw.time_constant_s,
-            command_delay_s=yaw.delay_s,
-            half_separation_m=0.5 * geometry.track_width_m * drive.wheel_separation_multiplier,
-            max_linear_mps=drive.max_linear_mps,
-        ),
-        footprint=Footprint(*geometry.footprint_half_extents_m),
-        omega_cmd_max_radps=drive.max_angular_radps,
-        # what a localisation would report about its own noise
-        pose_noise=PoseNoise(sc.sensing.pose_xy_std_m, sc.sensing.pose_yaw_std_rad),
+    return RobotFacts(
+        max_linear_mps=drive.max_linear_mps,
+        max_angular_radps=drive.max_angular_radps,
+        max_linear_accel_mps2=drive.max_linear_accel_mps2,
+        max_angular_accel_radps2=drive.max_angular_accel_radps2,
+        yaw_gain=yaw.gain,
+        yaw_time_constant_s=yaw.time_constant_s,
+        command_delay_s=yaw.delay_s,
+        half_separation_m=0.5 * geometry.track_width_m * drive.wheel_separation_multiplier,
+        footprint_half_extents_m=geometry.footprint_half_extents_m,
+        pose_xy_std_m=sc.sensing.pose_xy_std_m,
+        pose_yaw_std_rad=sc.sensing.pose_yaw_std_rad,
     )
-    config = apply_settings(config, sc.controller.husky_cbf)
-    # no more obstacle slots than the scenario has obstacles: each costs OCP rows
-    return dataclasses.replace(config, slots=min(max(len(sc.obstacle_specs()), 1), config.slots))
+
+
+def controller_inputs(sc: Scenario, name: str) -> ControllerInputs:
+    """What the controller `name` is built from for this scenario (controllers.registry)."""
+    return ControllerInputs(
+        nmpc=nmpc_config(sc),
+        robot=robot_facts(sc),
+        obstacle_count=len(sc.obstacle_specs()),
+        settings=given_settings(sc.controller, name),
+    )
+
+
+def controller_config(sc: Scenario, name: str) -> Any:
+    """The configuration of the controller `name` (a registered one) for this scenario."""
+    return registry.entry(name).configure(controller_inputs(sc, name))
+
+
+def plan_profile(sc: Scenario, name: str) -> PlanProfile:
+    """What the plans of the controller `name` promise on this scenario."""
+    entry = registry.entry(name)
+    return entry.profile(entry.configure(controller_inputs(sc, name)))
 
 
 def make_controller(sc: Scenario, name: str) -> Controller:
-    """The controller called `name` (controllers.CONTROLLER_NAMES) configured for this scenario."""
-    if name == "husky-cbf":
-        return HuskyCBFController(husky_cbf_config(sc))
-    return NMPCController(controller_config(sc, name))
+    """The controller called `name` (a registered one) configured for this scenario."""
+    return registry.entry(name).make(controller_inputs(sc, name))
 
 
 def episode_config(sc: Scenario) -> EpisodeConfig:

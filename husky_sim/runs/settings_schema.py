@@ -1,7 +1,7 @@
-"""The scenario schema's part for a controller's own settings (`controller.husky_cbf`), made from
-the controller's configuration dataclasses: every setting that carries a Range there
-(controllers.husky_cbf.config.setting) may be given, checked against that range, and nothing
-else. So a setting's default, its range and its reason live in one place, the controller's
+"""The scenario schema's part for each controller's own settings (`controller.husky_cbf`), made
+from the controller's configuration dataclass (its registry entry's `settings`): every setting that
+carries a Range there (controllers.settings.setting) may be given, checked against that range,
+and nothing else. So a setting's default, its range and its reason live in one place, the controller's
 config, and the schema cannot drift from it."""
 
 from __future__ import annotations
@@ -11,7 +11,8 @@ from typing import Annotated, Any
 
 from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, StrictBool, create_model
 
-from controllers.husky_cbf.config import EscapeConfig, GuidanceConfig, HuskyCBFConfig, Range
+from controllers import registry
+from controllers.settings import Range, nested_settings
 
 
 class _Settings(BaseModel):
@@ -45,14 +46,16 @@ def _field_type(allowed: Range, default: object) -> Any:
     return Annotated[kind_type | None, BeforeValidator(check), shown]
 
 
-def _model(config: type, name: str, nested: dict[str, type[BaseModel]]) -> type[BaseModel]:
+def _model(config: type, name: str) -> type[BaseModel]:
     """A pydantic model of `config`'s ranged and boolean settings (each optional: omitted ones
-    keep the default) and the `nested` sub-models."""
+    keep the default), with a sub-model for each nested settings block."""
+    nested = nested_settings(config)
     fields: dict[str, Any] = {}
     for f in dataclasses.fields(config):
         allowed = f.metadata.get("range")
         if f.name in nested:
-            fields[f.name] = (nested[f.name] | None, None)
+            sub = _model(nested[f.name], f"{name}_{f.name}")
+            fields[f.name] = (sub | None, None)
         elif allowed is not None:
             fields[f.name] = (_field_type(allowed, f.default), None)
         elif isinstance(f.default, bool):
@@ -60,18 +63,20 @@ def _model(config: type, name: str, nested: dict[str, type[BaseModel]]) -> type[
     return create_model(name, __base__=_Settings, __doc__=(config.__doc__ or "").strip(), **fields)
 
 
-GuidanceSettings = _model(GuidanceConfig, "GuidanceSettings", {})
-EscapeSettings = _model(EscapeConfig, "EscapeSettings", {})
-HuskyCBFSettings = _model(
-    HuskyCBFConfig, "HuskyCBFSettings", {"guidance": GuidanceSettings, "escape": EscapeSettings}
-)
+def settings_fields() -> dict[str, Any]:
+    """The `controller` block's field for each registered controller with settings of its own
+    (`controller.husky_cbf`): optional, its model made from the controller's config."""
+    out: dict[str, Any] = {}
+    for e in registry.entries():
+        if e.settings is not None:
+            model = _model(e.settings, f"{e.settings.__name__}Settings")
+            described = Field(default=None, description=f"{e.name}'s own settings ({e.summary})")
+            out[e.settings_key] = (model | None, described)
+    return out
 
 
-def apply_settings(config: HuskyCBFConfig, settings: BaseModel | None) -> HuskyCBFConfig:
-    """`config` with the settings a scenario gave (`controller.husky_cbf`); none: unchanged."""
-    if settings is None:
-        return config
-    given = settings.model_dump(exclude_none=True)
-    guidance = dataclasses.replace(config.guidance, **given.pop("guidance", {}))
-    escape = dataclasses.replace(config.escape, **given.pop("escape", {}))
-    return dataclasses.replace(config, **given, guidance=guidance, escape=escape)
+def given_settings(spec: BaseModel, name: str) -> dict[str, Any]:
+    """The settings a scenario's `controller` block gave the controller `name` (nested blocks as
+    dicts, omitted ones left out): what its `configure` applies."""
+    block = getattr(spec, registry.entry(name).settings_key, None)
+    return {} if block is None else block.model_dump(exclude_none=True)

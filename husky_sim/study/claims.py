@@ -28,6 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
+from controllers import paper, registry
 from husky_sim.runs.paper_problems import PAPER_ROBOT_RADIUS_M
 from husky_sim.runs.run_folder import read_log
 from husky_sim.study.suite import OURS, Cell, run_suite
@@ -38,7 +39,8 @@ TRACKING = ("paper_dynamic_tracking", "paper_dynamic_tracking_crossing")
 HUSKY = ("husky_point_stabilisation", "husky_circle_tracking")
 SIM_SCAN_HORIZONS = (3, 4, 5, 6, 7, 8, 10, 12)  # tau = 0.1 s: 0.3 to 1.2 s
 HUSKY_SCAN_HORIZONS = (3, 4, 5, 6, 7, 8, 10, 12, 15)  # tau = 0.2 s: 0.6 to 3.0 s
-CONTROLLERS = ("bt", "cbf", "relax-cbf")
+BT, CBF, RELAX = paper.BT.name, paper.CBF.name, paper.RELAX_CBF.name
+CONTROLLERS = registry.paper_names(with_baseline=False)
 #: Our controller (suite.OURS) has PyBullet runs only: run_scenario_kinematic runs only the paper's
 #: unicycle controllers.
 OURS_MODELS = ("physics",)
@@ -84,21 +86,21 @@ class ClaimResult:
 
 def _cell(model: str, scenario: str, controller: str, horizon: int, gamma: float | None = None) -> Cell:
     radius = PAPER_ROBOT_RADIUS_M if model == "kinematic" and scenario.startswith("paper_") else None
-    return Cell(scenario, controller, horizon, None if controller == "bt" else gamma, None, model, radius)
+    return Cell(scenario, controller, horizon, None if controller == BT else gamma, None, model, radius)
 
 
 def required_cells(model: str) -> list[Cell]:
     """Every run the report needs for one model, without duplicates, in a fixed order."""
     cells = [_cell(model, POINT, c, n, g) for c in CONTROLLERS for n in SIM_SCAN_HORIZONS for g in (None,)]
-    cells += [_cell(model, POINT, c, 5, 0.05) for c in ("cbf", "relax-cbf")]
+    cells += [_cell(model, POINT, c, 5, 0.05) for c in (CBF, RELAX)]
     for s in TRACKING:
         cells += [
-            _cell(model, s, "bt", 12),
-            _cell(model, s, "relax-cbf", 12, 0.2),
-            _cell(model, s, "bt", 5),
-            _cell(model, s, "relax-cbf", 5, 0.12),
-            _cell(model, s, "cbf", 5, 0.03),
-            _cell(model, s, "relax-cbf", 5, 0.03),
+            _cell(model, s, BT, 12),
+            _cell(model, s, RELAX, 12, 0.2),
+            _cell(model, s, BT, 5),
+            _cell(model, s, RELAX, 5, 0.12),
+            _cell(model, s, CBF, 5, 0.03),
+            _cell(model, s, RELAX, 5, 0.03),
         ]
     cells += [_cell(model, s, c, n) for s in HUSKY for c in CONTROLLERS for n in HUSKY_SCAN_HORIZONS]
     if model in OURS_MODELS:
@@ -140,7 +142,7 @@ def succeeded(row: dict[str, object]) -> bool:
 def describe(row: dict[str, object]) -> str:
     """A short run description: controller, N, gamma, outcome and key numbers."""
     name = f"{row['controller']} N={row['horizon']}" + (
-        "" if row["controller"] == "bt" else f" g={row['gamma']:g}"
+        "" if row["controller"] == BT else f" g={row['gamma']:g}"
     )
     clear = row.get("min_clearance_m")
     parts = [str(row["outcome"])]
@@ -201,24 +203,24 @@ def claim_long_horizon(runs: Runs, model: str) -> Verdict:
 
 
 def claim_short_horizon_cbf(runs: Runs, model: str) -> Verdict:
-    cbf, bt = runs.get(model, POINT, "cbf", 5), runs.get(model, POINT, "bt", 5)
+    cbf, bt = runs.get(model, POINT, CBF, 5), runs.get(model, POINT, BT, 5)
     bt_struggles = not succeeded(bt) or bool(bt["reversals"])
     return Verdict(_grade_primary([succeeded(cbf)], [bt_struggles]), f"{describe(cbf)}; {describe(bt)}")
 
 
 def claim_low_gamma(runs: Runs, model: str) -> Verdict:
-    cbf, relax = runs.get(model, POINT, "cbf", 5, 0.05), runs.get(model, POINT, "relax-cbf", 5, 0.05)
+    cbf, relax = runs.get(model, POINT, CBF, 5, 0.05), runs.get(model, POINT, RELAX, 5, 0.05)
     grade = _grade_primary([succeeded(relax)], [not succeeded(cbf)])
     return Verdict(grade, f"{describe(cbf)}; {describe(relax)}")
 
 
 def claim_tracking_long(runs: Runs, model: str, scenario: str) -> Verdict:
-    rows = [runs.get(model, scenario, "bt", 12), runs.get(model, scenario, "relax-cbf", 12, 0.2)]
+    rows = [runs.get(model, scenario, BT, 12), runs.get(model, scenario, RELAX, 12, 0.2)]
     return Verdict(_grade([succeeded(r) for r in rows]), "; ".join(describe(r) for r in rows))
 
 
 def claim_tracking_earlier_smoother(runs: Runs, model: str, scenario: str) -> Verdict:
-    bt, relax = runs.get(model, scenario, "bt", 5), runs.get(model, scenario, "relax-cbf", 5, 0.12)
+    bt, relax = runs.get(model, scenario, BT, 5), runs.get(model, scenario, RELAX, 5, 0.12)
     sb, sr = runs.series(bt), runs.series(relax)
     onset_b, onset_r = deviation_onset_s(sb), deviation_onset_s(sr)
     rough_b, rough_r = input_roughness(sb), input_roughness(sr)
@@ -241,8 +243,8 @@ def claim_tracking_earlier_smoother(runs: Runs, model: str, scenario: str) -> Ve
 
 
 def claim_low_gamma_tracking(runs: Runs, model: str, scenario: str) -> Verdict:
-    cbf = runs.get(model, scenario, "cbf", 5, 0.03)
-    relax = runs.get(model, scenario, "relax-cbf", 5, 0.03)
+    cbf = runs.get(model, scenario, CBF, 5, 0.03)
+    relax = runs.get(model, scenario, RELAX, 5, 0.03)
     grade = _grade_primary([succeeded(relax)], [not succeeded(cbf)])
     return Verdict(grade, f"{describe(cbf)}; {describe(relax)}")
 
@@ -292,7 +294,7 @@ def claim_prediction_time(
     Relax-CBF figures `paper` (s)."""
     best = {c: shortest_prediction_time(runs, model, scenarios, c, horizons) for c in CONTROLLERS}
     text = ", ".join(f"{c} {'none' if t is None else f'{t:.1f} s'}" for c, t in best.items())
-    bt, relax = best["bt"], best["relax-cbf"]
+    bt, relax = best[BT], best[RELAX]
     if relax is not None and bt is not None:
         text += f"; reduction BT -> Relax-CBF {100 * (1 - relax / bt):.2f} %"
     paper_long, paper_short = paper

@@ -17,6 +17,9 @@ from pathlib import Path
 
 from tqdm import tqdm
 
+from controllers import registry
+from controllers.husky_cbf.registration import HUSKY_CBF
+from controllers.paper import BT, CBF, RELAX_CBF
 from husky_sim.runs.parallel import Backend, parallel_map, process_map
 from husky_sim.runs.run_folder import RESULTS_FILE, write_results_csv
 
@@ -82,7 +85,7 @@ def matrix(
         Cell(s, c, n, g, seed, solver=solver)
         for s in scenarios
         for c in controllers
-        for g in (gammas if c != "bt" and c != "none" else gammas[:1])  # bt has no gamma
+        for g in (gammas if registry.entry(c).decay_rate else gammas[:1])  # bt has no gamma
         for n in horizons
     ]
     return list(dict.fromkeys(cells))
@@ -90,19 +93,21 @@ def matrix(
 
 #: The scenario suite's horizons (the issue's N in {5, 7, 12}).
 SUITE_HORIZONS = (5, 7, 12)
-SUITE_CONTROLLERS = ("bt", "cbf", "relax-cbf")
+#: The paper's three (controllers.paper), the suite's default controllers.
+SUITE_CONTROLLERS = registry.paper_names(with_baseline=False)
 #: Our controller (controllers/husky_cbf), reported beside the paper's three.
-OURS = "husky-cbf"
+OURS = HUSKY_CBF.name
+_BT, _CBF, _RELAX = BT.name, CBF.name, RELAX_CBF.name
 
 #: The gamma values the paper uses beyond each scenario file's own: gamma = 0.05 in point
 #: stabilisation ("too low for plain CBF, Relax-CBF still reaches"); in tracking, Relax-CBF
 #: gamma = 0.2 at N = 12 and CBF / Relax-CBF gamma = 0.03 at N = 5 (Fig. 4 (b) and (d)).
 PAPER_GAMMA_CELLS = tuple(
-    [Cell("paper_point_stabilisation", c, n, 0.05) for c in ("cbf", "relax-cbf") for n in SUITE_HORIZONS]
+    [Cell("paper_point_stabilisation", c, n, 0.05) for c in (_CBF, _RELAX) for n in SUITE_HORIZONS]
     + [
         cell
         for s in ("paper_dynamic_tracking", "paper_dynamic_tracking_crossing")
-        for cell in (Cell(s, "relax-cbf", 12, 0.2), Cell(s, "cbf", 5, 0.03), Cell(s, "relax-cbf", 5, 0.03))
+        for cell in (Cell(s, _RELAX, 12, 0.2), Cell(s, _CBF, 5, 0.03), Cell(s, _RELAX, 5, 0.03))
     ]
 )
 
@@ -320,7 +325,7 @@ def outcome_legend(rows: Sequence[dict[str, object]]) -> str:
                 f"{NEAR_GOAL_M:g} m of the goal, beside it. {BESIDE_GOAL_NOTE}",
             ]
     collided_paper = [
-        r for r in rows if r.get("outcome") == "collided" and r.get("controller") in ("bt", "relax-cbf")
+        r for r in rows if r.get("outcome") == "collided" and r.get("controller") in (_BT, _RELAX)
     ]
     if collided_paper:
         lines += ["", f"{len(collided_paper)} runs of BT or Relax-CBF are `collided`. {PAPER_COLLISION_NOTE}"]

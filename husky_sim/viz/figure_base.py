@@ -27,6 +27,7 @@ from matplotlib.axes import Axes  # noqa: E402
 from matplotlib.figure import Figure  # noqa: E402
 from matplotlib.patches import Circle, Rectangle  # noqa: E402
 
+from controllers import registry  # noqa: E402
 from husky_sim.runs.run_folder import read_log, read_summary, read_trace  # noqa: E402
 from husky_sim.sim.trace import EpisodeTrace  # noqa: E402
 
@@ -61,6 +62,25 @@ LIMIT_STYLE = {"color": "tab:red", "linestyle": "--", "linewidth": 0.9}
 
 FigurePaths = tuple[Path, Path]  # (png, svg)
 SceneBox = tuple[np.ndarray, np.ndarray]  # (lower-left, upper-right) corners (m)
+
+
+def _entry_flag(controller: str, flag: str) -> bool:
+    """A registered controller's flag (controllers.registry); True for a run of a controller this
+    process does not know (its figures show what its log holds)."""
+    try:
+        return bool(getattr(registry.entry(controller), flag))
+    except ValueError:
+        return True
+
+
+def _shows_gamma(controller: str) -> bool:
+    """Whether gamma means something to the controller (BT has no decay rate)."""
+    return _entry_flag(controller, "decay_rate")
+
+
+def decay_slack_is_variable(controller: str) -> bool:
+    """Whether s_h is one of the controller's decision variables (Relax-CBF's)."""
+    return _entry_flag(controller, "decay_slack")
 
 
 class PlotInputError(ValueError):
@@ -100,7 +120,7 @@ class RunRecord:
         """Legend text such as "bt N=5" or "relax-cbf N=5 γ=0.12"."""
         controller = str(self.summary["controller"])
         text = f"{controller} N={self.summary['horizon']}"
-        if controller != "bt" and self.summary.get("gamma") is not None:
+        if _shows_gamma(controller) and self.summary.get("gamma") is not None:
             text += f" γ={float(self.summary['gamma']):g}"
         if with_seed:
             text += f" seed={self.summary.get('seed')}"

@@ -22,6 +22,7 @@ from husky_sim.viz.figure_base import (  # noqa: E402
     RunRecord,
     SceneBox,
     barrier_series,
+    decay_slack_is_variable,
     draw_arena,
     draw_moving_obstacles,
     draw_reference,
@@ -173,7 +174,7 @@ def _slacks_figure(run: RunRecord) -> Figure:
     s_h = run.log["s_h_min"]
     ax_h.step(t, s_h, where="post", color="tab:brown", label="s_h (smallest over the horizon)")
     ax_h.axhline(1.0, color="0.4", linestyle=":", linewidth=0.9, label="s_h = 1 (no relaxation)")
-    if controller != "relax-cbf":
+    if not decay_slack_is_variable(controller):
         ax_h.text(
             0.01,
             0.05,

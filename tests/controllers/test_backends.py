@@ -92,7 +92,7 @@ def test_a_row_across_two_stages_is_refused() -> None:
 
 
 def test_husky_cbf_problems_are_stagewise() -> None:
-    config = load_scenario("head_on_moving_obstacle").with_overrides(horizon=5).husky_cbf_config()
+    config = load_scenario("head_on_moving_obstacle").with_overrides(horizon=5).controller_config("husky-cbf")
     for soft in (False, True):
         problem = build_problem(config, 5, config.slots, soft)
         stagewise = transcribe(problem.nlp.problem, *problem.nlp.bounds[2:], problem.nlp.stages)
@@ -304,7 +304,7 @@ def test_a_scenario_file_chooses_the_solver() -> None:
     data["controller"]["solver"] = "ipopt"
     scenario = scenario_from_data(data)
     assert scenario.controller_config("cbf").solver.backend == "ipopt"
-    assert scenario.with_overrides(horizon=5).husky_cbf_config().nmpc.solver.backend == "ipopt"
+    assert scenario.with_overrides(horizon=5).controller_config("husky-cbf").nmpc.solver.backend == "ipopt"
     data["controller"]["solver"] = "hpipm"
     with pytest.raises(ValueError, match="solver"):
         scenario_from_data(data)

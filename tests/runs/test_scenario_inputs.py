@@ -169,7 +169,7 @@ def test_any_number_anywhere_loads_finite_or_fails_in_one_line(
     episode = sc.episode_config()  # what runs is built without surprises
     assert math.isfinite(episode.duration_s) and episode.tau_s > 0
     if path[:2] == ("controller", "husky_cbf"):  # the schema's ranges are the config's own
-        sc.husky_cbf_config()
+        sc.controller_config("husky-cbf")
 
 
 def _all_numbers(node: Any) -> list[float]:
@@ -338,15 +338,13 @@ def test_cli_out_must_be_a_creatable_directory(tmp_path: Path) -> None:
     assert code == 2 and "--out" in err
 
 
-def test_cli_controller_choices_are_the_controllers_packages() -> None:
+def test_cli_choices_are_the_controllers_packages() -> None:
     """The CLI names them without importing CasADi before its signal handlers; they must not drift."""
-    from controllers import CONTROLLER_NAMES
     from controllers.config import SOLVER_BACKENDS
-    from husky_sim.cli import CONTROLLER_CHOICES, SOLVER_CHOICES
+    from husky_sim.cli import SOLVER_CHOICES
     from husky_sim.cli.common import MAX_HORIZON, PARALLEL_BACKENDS, RUN_SOLVER_CHOICES
     from husky_sim.runs import parallel, scenario
 
-    assert CONTROLLER_CHOICES == CONTROLLER_NAMES
     assert SOLVER_CHOICES == SOLVER_BACKENDS
     literal, _ = get_args(scenario.ControllerSpec.model_fields["solver"].annotation)  # Literal | None
     assert set(RUN_SOLVER_CHOICES) == set(get_args(literal))

@@ -200,7 +200,7 @@ def test_a_scenario_sets_husky_cbfs_own_settings_within_their_ranges() -> None:
             }
         },
     }
-    config = scenario_from_data(data, "test").husky_cbf_config()
+    config = scenario_from_data(data, "test").controller_config("husky-cbf")
     assert (config.margin_m, config.terminal_weight) == (0.2, (1.0, 2.0, 3.0))
     assert config.guidance.lookahead_m == 2.0 and config.guidance == GuidanceConfig(lookahead_m=2.0)
     assert config.escape == EscapeConfig(enabled=False, idle_s=1.0)

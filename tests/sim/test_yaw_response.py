@@ -141,7 +141,7 @@ def test_scenario_yaw_response_given() -> None:
     assert sc.robot.yaw_response_params() == YawResponse(0.7, 0.25, 0.0)  # no dead time declared
     sc = scenario_from_data(_scenario_data({"gain": 0.7, "time_constant_s": 0.25, "delay_s": 0.3}))
     assert sc.robot.yaw_response_params() == YawResponse(0.7, 0.25, 0.3)
-    assert sc.husky_cbf_config().response.command_delay_s == 0.3
+    assert sc.controller_config("husky-cbf").response.command_delay_s == 0.3
 
 
 @pytest.mark.parametrize(

@@ -342,5 +342,5 @@ def test_with_a_dead_time_longer_than_tau_the_step_now_is_the_past_commands() ->
 
 
 def test_husky_cbf_is_told_the_default_grounds_dead_time() -> None:
-    response = load_scenario("husky_point_stabilisation").husky_cbf_config().response
+    response = load_scenario("husky_point_stabilisation").controller_config("husky-cbf").response
     assert response.command_delay_s == load_ground().drive.command_delay_s > 0.3

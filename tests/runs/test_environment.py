@@ -11,7 +11,7 @@ from gymnasium.utils.env_checker import check_env
 
 import husky_sim  # noqa: F401 - registers HuskyNav-v0
 from controllers import NMPCConfig, NMPCController, SetPoint
-from husky_sim.sim.environment import OBSERVED_OBSTACLES, HuskyNavEnv
+from husky_sim.runs.environment import OBSERVED_OBSTACLES, HuskyNavEnv
 from husky_sim.sim.episode import EpisodeConfig, run_episode
 from husky_sim.sim.sensing import SensingConfig
 from husky_sim.sim.world import ObstacleSpec, WorldConfig
