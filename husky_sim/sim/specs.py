@@ -1,52 +1,20 @@
-"""Published figures for the Clearpath Husky A200, each with the place it was taken from.
-
-Only numbers are taken from these sources; no code was copied.
-
-Sources
--------
-[MANUAL]    Clearpath Robotics, "Husky A200 User Manual", section "System Specifications"
-            and "Robot Equations". Repository ``clearpathrobotics/cpr-documentation``,
-            file ``docs_robots/outdoor_robots/husky/a200/user_manual_husky.mdx``
-            (commit b4e8e8e052cd64416ea14ac763b0c00f5809e897), published at
-            docs.clearpathrobotics.com (Husky A200 > User Manual). The same effective
-            track (0.555 m) is on p. 9 of the 2011 PDF manual:
-            https://www.manualslib.com/manual/3073500/Clearpath-Husky-A200.html?page=9
-[URDF]      Repository ``husky/husky``, ``husky_description/urdf/husky.urdf.xacro``
-            (commit 03cff3700a7009745b66cd842d2d80eed7433849) and
-            ``husky_description/urdf/husky_macro.urdf.xacro``
-            (commit da175a7ce54eb2f4dbc56ddf9bc3a0c383288c9e): base size, wheel mounting
-            positions, wheel size, ``inertial_link``; ros2_control hardware parameters.
-            Identical numbers in ``clearpathrobotics/clearpath_common``,
-            ``clearpath_platform_description/urdf/a200/a200.urdf.xacro``.
-[WHEEL]     Repository ``husky/husky``, ``husky_description/urdf/wheel.urdf.xacro``
-            (commit 0f3d22501a5e919024e08569ae6c461a80ecfbf6): wheel mass, inertia, friction.
-            Axle orientation of that inertia: husky/husky issue #34 "Wheel inertias flipped"
-            (https://github.com/husky/husky/issues/34), fixed upstream by swapping iyy/izz,
-            and ``clearpathrobotics/clearpath_common``
-            ``clearpath_platform_description/urdf/a200/drivetrain/wheels/outdoor.urdf.xacro``
-            (commit 3197f4475902c7a5755b3b4ea0b305ed097ab757), which puts the axle on y.
-[DECOR]     Repository ``husky/husky``, ``husky_description/urdf/decorations.urdf.xacro``
-            (commit 1a43fa4b38c7db68c0425b0401002f378e53bd0d): bumper and top-plate mounts.
-[CONTROL]   Repository ``husky/husky``, ``husky_control/config/control.yaml``
-            (commit a087a3dcc5b95b2350a3b1a851f551f8078fa539): ROS 1 diff_drive_controller.
-[CONTROL2]  Repository ``clearpathrobotics/clearpath_common``,
-            ``clearpath_control/config/a200/control.yaml``
-            (commit 077ed1c954ee51cf286d60569789057a0d7f0cb0): ROS 2 diff_drive_controller.
-[MOTOR]     The A200's drive (one gearmotor per side, both wheels of a side on one belt): Midwest
-            Motion Products S22-346F-24V with a GP52-079 planetary gearbox (about 78.71:1), 10.7 A
-            continuous, behind a motor controller that limits current at 26 A, as listed for the
-            A200 by Clearpath; torque constant about 0.0445 N m/A as identified by McCormick et
-            al. 2022 (Husky parameter identification). The gearbox efficiency is ours (below).
-[PR36]      husky/husky pull request #36 (https://github.com/husky/husky/pull/36): history of
-            the ``inertial_link`` values (an earlier 33.455 kg set had its COM offset on x).
-
-Conflicts between sources are listed in :data:`KNOWN_DISCREPANCIES`; the choices made for
-``assets/husky_a200/husky_a200.urdf`` are in :data:`HUSKY_MODEL`.
+"""The robot's published figures, each with the place it was taken from: read from its folder
+(`assets/husky_a200/specs.yaml`, where every figure stands beside its source), the one place they
+are written. Conflicts between sources are listed there (`known_discrepancies`); the choices made
+for `assets/husky_a200/husky_a200.urdf` are derived here (:data:`HUSKY_MODEL`).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
+from pathlib import Path
+from typing import Any
+
+from husky_sim.paths import ASSETS_DIR
+from husky_sim.scenario_file import ScenarioFileError, read_scenario_data
+
+#: The Husky's published figures with their sources.
+SPECS_FILE: Path = ASSETS_DIR / "specs.yaml"
 
 # Inertia tensors are stored as (ixx, ixy, ixz, iyy, iyz, izz) in kg*m^2, as in URDF.
 InertiaTuple = tuple[float, float, float, float, float, float]
@@ -57,22 +25,22 @@ Vec3 = tuple[float, float, float]
 class SpecSheet:
     """Manufacturer specification table of the real robot ([MANUAL])."""
 
-    length_m: float = 0.990  # [MANUAL] Dimension, Length: 990 mm (overall, bumpers included)
-    width_m: float = 0.670  # [MANUAL] Dimension, Width: 670 mm (overall, wheels included)
-    height_m: float = 0.390  # [MANUAL] Dimension, Height: 390 mm (ground to top)
-    track_width_m: float = 0.550  # [MANUAL] Track Width: 550 mm (see KNOWN_DISCREPANCIES)
-    wheelbase_m: float = 0.512  # [MANUAL] Wheelbase Length: 512 mm
-    ground_clearance_m: float = 0.130  # [MANUAL] Ground Clearance: 130 mm
-    mass_kg: float = 50.0  # [MANUAL] Mass: 50 kg
-    max_payload_kg: float = 75.0  # [MANUAL] Maximum Payload: 75 kg (flat terrain, wide turns)
-    all_terrain_payload_kg: float = 20.0  # [MANUAL] All-terrain Payload: 20 kg
-    max_speed_mps: float = 1.0  # [MANUAL] Speed, Maximum: 1 m/s
-    climb_grade_deg: float = 45.0  # [MANUAL] Climb Grade: 45 deg
-    traversal_grade_deg: float = 30.0  # [MANUAL] Traversal Grade / Sideslope: 30 deg
-    effective_track_m: float = 0.555  # [MANUAL] "Robot Equations": effective track W = 0.555 m
-    encoder_ticks_per_m: float = 78_000.0  # [MANUAL] Wheel Encoders: 78,000 ticks/m
-    battery_capacity_ah: float = 20.0  # [MANUAL] Battery: 20 Ah @ 24 V sealed lead-acid
-    battery_voltage_v: float = 24.0  # [MANUAL] Battery: 24 V
+    length_m: float
+    width_m: float
+    height_m: float
+    track_width_m: float
+    wheelbase_m: float
+    ground_clearance_m: float
+    mass_kg: float
+    max_payload_kg: float
+    all_terrain_payload_kg: float
+    max_speed_mps: float
+    climb_grade_deg: float
+    traversal_grade_deg: float
+    effective_track_m: float
+    encoder_ticks_per_m: float
+    battery_capacity_ah: float
+    battery_voltage_v: float
 
 
 @dataclass(frozen=True)
@@ -80,40 +48,33 @@ class PublishedDescription:
     """Figures of Clearpath's own robot description (URDF/xacro)."""
 
     # Chassis collision envelope; base_link is the centre of the bottom plate.
-    base_x_size_m: float = 0.9874  # [URDF] base_x_size
-    base_y_size_m: float = 0.5709  # [URDF] base_y_size
-    base_z_size_m: float = 0.2475  # [URDF] base_z_size
-    upper_box_length_fraction: float = 0.8  # [URDF] upper collision box is base_x_size*4/5 long
+    base_x_size_m: float
+    base_y_size_m: float
+    base_z_size_m: float
+    upper_box_length_fraction: float
     # Wheel mounting: joint origins at (+-wheelbase/2, +-track/2, wheel_vertical_offset).
-    wheelbase_m: float = 0.5120  # [URDF] wheelbase (front-rear axle distance)
-    track_m: float = 0.5708  # [URDF] track (left-right wheel centre distance)
-    wheel_vertical_offset_m: float = 0.03282  # [URDF] axle height above base_link
+    wheelbase_m: float
+    track_m: float
+    wheel_vertical_offset_m: float
     # Wheels (13 in outdoor tyre).
-    wheel_radius_m: float = 0.1651  # [URDF] wheel_radius; [WHEEL] outdoor.urdf.xacro
-    wheel_width_m: float = 0.1143  # [URDF] wheel_length; [WHEEL] outdoor wheel width
-    wheel_diameter_m: float = 0.3302  # [URDF] husky_macro ros2_control param wheel_diameter
-    wheel_mass_kg: float = 2.637  # [WHEEL] wheel link mass
-    wheel_inertia_radial_kgm2: float = 0.02467  # [WHEEL] ixx = izz (about a diameter)
-    wheel_inertia_axle_kgm2: float = 0.04411  # [WHEEL] iyy (about the axle, after issue #34)
-    wheel_friction_mu: float = 1.0  # [WHEEL] Gazebo mu1 = mu2 = 1.0
+    wheel_radius_m: float
+    wheel_width_m: float
+    wheel_diameter_m: float
+    wheel_mass_kg: float
+    wheel_inertia_radial_kgm2: float
+    wheel_inertia_axle_kgm2: float
+    wheel_friction_mu: float
     # Chassis inertial ("inertial_link", fixed to base_link at the origin).
-    base_inertial_mass_kg: float = 46.034  # [URDF] inertial_link mass
-    base_inertial_com_m: Vec3 = (-0.00065, -0.085, 0.062)  # [URDF] inertial_link origin
-    base_inertia_kgm2: InertiaTuple = (  # [URDF] inertial_link inertia about its COM
-        0.6022,  # ixx
-        -0.02364,  # ixy
-        -0.1197,  # ixz
-        1.7386,  # iyy
-        -0.001544,  # iyz
-        2.0296,  # izz
-    )
+    base_inertial_mass_kg: float
+    base_inertial_com_m: Vec3
+    base_inertia_kgm2: InertiaTuple
     # Decorations (meshes only upstream; positions relative to base_link).
-    bumper_mount_x_m: float = 0.48  # [DECOR] front/rear bumper joints at x = +-0.48 m
-    bumper_mount_z_m: float = 0.091  # [DECOR] bumper joints at z = 0.091 m
-    top_plate_mount_m: Vec3 = (0.0812, 0.0, 0.245)  # [DECOR] top_plate_joint origin
+    bumper_mount_x_m: float
+    bumper_mount_z_m: float
+    top_plate_mount_m: Vec3
     # Drive hardware limits (ros2_control hardware params in husky_macro.urdf.xacro).
-    hardware_max_speed_mps: float = 1.0  # [URDF] husky_macro param max_speed
-    hardware_max_accel_mps2: float = 5.0  # [URDF] husky_macro param max_accel
+    hardware_max_speed_mps: float
+    hardware_max_accel_mps2: float
 
 
 @dataclass(frozen=True)
@@ -135,30 +96,57 @@ class DiffDriveLimits:
         return base * self.wheel_separation_multiplier
 
 
-# [CONTROL] husky/husky husky_control/config/control.yaml (ROS 1). The controller reads the
-# separation from the URDF (track 0.5708 m). All limits have has_*_limits: true.
-ROS1_DIFF_DRIVE = DiffDriveLimits(
-    wheel_separation_multiplier=1.875,  # [CONTROL] wheel_separation_multiplier
-    wheel_radius_multiplier=1.0,  # [CONTROL] wheel_radius_multiplier
-    linear_max_velocity_mps=1.0,  # [CONTROL] linear.x.max_velocity (see discrepancies)
-    linear_max_acceleration_mps2=3.0,  # [CONTROL] linear.x.max_acceleration
-    angular_max_velocity_radps=2.0,  # [CONTROL] angular.z.max_velocity
-    angular_max_acceleration_radps2=6.0,  # [CONTROL] angular.z.max_acceleration
-    wheel_separation_m=None,
-    cmd_vel_timeout_s=0.25,  # [CONTROL] cmd_vel_timeout
-)
+@dataclass(frozen=True)
+class MotorSpec:
+    """One side's gearmotor and its controller ([MOTOR])."""
 
-# [CONTROL2] clearpath_common clearpath_control/config/a200/control.yaml (ROS 2).
-ROS2_DIFF_DRIVE = DiffDriveLimits(
-    wheel_separation_multiplier=1.875,  # [CONTROL2] wheel_separation_multiplier
-    wheel_radius_multiplier=1.0,  # [CONTROL2] left/right_wheel_radius_multiplier
-    linear_max_velocity_mps=1.0,  # [CONTROL2] linear.x.max_velocity
-    linear_max_acceleration_mps2=1.0,  # [CONTROL2] linear.x.max_acceleration
-    angular_max_velocity_radps=1.0,  # [CONTROL2] angular.z.max_velocity
-    angular_max_acceleration_radps2=1.0,  # [CONTROL2] angular.z.max_acceleration
-    wheel_separation_m=0.555,  # [CONTROL2] wheel_separation (= MANUAL effective track)
-    cmd_vel_timeout_s=0.5,  # [CONTROL2] cmd_vel_timeout
-)
+    torque_constant_nm_per_a: float  # N m / A
+    gear_ratio: float  # motor turns per wheel turn
+    continuous_current_a: float  # rated continuous current (A)
+    current_limit_a: float  # the motor controller's current limit (A)
+    gearbox_efficiency: float  # output / input power
+
+
+@dataclass(frozen=True)
+class RobotSpecs:
+    """Everything published about the robot, as its specs file holds it."""
+
+    sources: dict[str, str]  # tag ([MANUAL], ...) -> where the figures were taken from
+    spec_sheet: SpecSheet
+    description: PublishedDescription
+    ros1_diff_drive: DiffDriveLimits  # the simulated drive's defaults
+    ros2_diff_drive: DiffDriveLimits
+    motor: MotorSpec
+    known_discrepancies: tuple[str, ...]
+
+
+def _section(kind: type, data: Any, where: str) -> Any:
+    """`kind` (a dataclass) from a mapping with exactly its fields; lists become tuples."""
+    names = {f.name for f in fields(kind)}
+    if not isinstance(data, dict) or set(data) != names:
+        given = set(data) if isinstance(data, dict) else set()
+        wrong = sorted(given - names) or sorted(names - given) or ["(not a mapping)"]
+        raise ValueError(f"{where}: expected the fields of {kind.__name__}; check {', '.join(wrong)}")
+    return kind(**{k: tuple(v) if isinstance(v, list) else v for k, v in data.items()})
+
+
+def load_specs(path: Path = SPECS_FILE) -> RobotSpecs:
+    """A robot's published figures from its specs file; a missing or extra field is a one-line
+    ValueError naming the file and the section."""
+    try:
+        data = read_scenario_data(path)
+    except ScenarioFileError as exc:
+        raise ValueError(str(exc)) from None
+    drive = data.get("diff_drive", {})
+    return RobotSpecs(
+        sources=dict(data.get("sources", {})),
+        spec_sheet=_section(SpecSheet, data.get("spec_sheet"), f"{path}: spec_sheet"),
+        description=_section(PublishedDescription, data.get("description"), f"{path}: description"),
+        ros1_diff_drive=_section(DiffDriveLimits, drive.get("ros1"), f"{path}: diff_drive.ros1"),
+        ros2_diff_drive=_section(DiffDriveLimits, drive.get("ros2"), f"{path}: diff_drive.ros2"),
+        motor=_section(MotorSpec, data.get("motor"), f"{path}: motor"),
+        known_discrepancies=tuple(data.get("known_discrepancies", ())),
+    )
 
 
 @dataclass(frozen=True)
@@ -228,8 +216,11 @@ def _build_model(sheet: SpecSheet, desc: PublishedDescription) -> HuskyModel:
     )
 
 
-HUSKY_SPEC_SHEET = SpecSheet()
-HUSKY_DESCRIPTION = PublishedDescription()
+HUSKY = load_specs()
+HUSKY_SPEC_SHEET = HUSKY.spec_sheet
+HUSKY_DESCRIPTION = HUSKY.description
+ROS1_DIFF_DRIVE = HUSKY.ros1_diff_drive  # [CONTROL]
+ROS2_DIFF_DRIVE = HUSKY.ros2_diff_drive  # [CONTROL2]
 HUSKY_MODEL = _build_model(HUSKY_SPEC_SHEET, HUSKY_DESCRIPTION)
 
 # Convenience constants (the figures the simulator uses).
@@ -244,37 +235,10 @@ WHEEL_RADIUS_MULTIPLIER: float = ROS1_DIFF_DRIVE.wheel_radius_multiplier  # [CON
 LINEAR_MAX_VELOCITY_MPS: float = ROS1_DIFF_DRIVE.linear_max_velocity_mps  # [CONTROL]
 LINEAR_MAX_ACCELERATION_MPS2: float = ROS1_DIFF_DRIVE.linear_max_acceleration_mps2  # [CONTROL]
 ANGULAR_MAX_VELOCITY_RADPS: float = ROS1_DIFF_DRIVE.angular_max_velocity_radps  # [CONTROL]
-ANGULAR_MAX_ACCELERATION_RADPS2: float = (
-    ROS1_DIFF_DRIVE.angular_max_acceleration_radps2  # [CONTROL]
-)
-
-# [MOTOR] one side's gearmotor
-MOTOR_TORQUE_CONSTANT_NM_PER_A: float = 0.0445  # [MOTOR] McCormick et al. 2022
-MOTOR_GEAR_RATIO: float = 78.71  # [MOTOR] GP52-079 planetary gearbox
-MOTOR_CONTINUOUS_CURRENT_A: float = 10.7  # [MOTOR] rated continuous current
-MOTOR_CURRENT_LIMIT_A: float = 26.0  # [MOTOR] motor controller current limit
-#: Not published: three planetary stages at about 0.9 each (0.9^3 = 0.73), the usual figure for a
-#: three-stage planetary gearhead; the motor currents of the wet-grass recording are checked
-#: against it (tests/calibration).
-MOTOR_GEARBOX_EFFICIENCY: float = 0.73
-
-KNOWN_DISCREPANCIES: tuple[str, ...] = (
-    "Mass: [MANUAL] says 50 kg; [URDF] inertial_link 46.034 kg + 4 x 2.637 kg wheels = "
-    "56.582 kg (+13 %). The model uses 50 kg and scales the chassis inertia.",
-    "Chassis products of inertia: [URDF] ixy = -0.02364, ixz = -0.1197, iyz = -0.001544 "
-    "kg*m^2 (principal axes tilted ~5 deg). The model keeps only the (scaled) diagonal so "
-    "the PyBullet base inertial frame stays aligned with base_link.",
-    "Chassis COM: [URDF] puts it at y = -0.085 m (8.5 cm to the right); [PR36] shows an "
-    "earlier value with the ~0.087 m offset on x instead, so the lateral offset is likely an "
-    "axis mix-up. The model uses y = 0 (published x = -0.00065 m, z = 0.062 m kept).",
-    "Track: [URDF] 0.5708 m between wheel centres; [MANUAL] table says 550 mm; [MANUAL] "
-    "robot equations and [CONTROL2] use an effective track of 0.555 m. Geometry uses 0.5708.",
-    "Wheel inertia: the original [WHEEL] file had the 0.04411 kg*m^2 term on z; upstream "
-    "issue #34 swapped it onto y (the axle). Solid-cylinder values would be 0.0208/0.0359.",
-    "Linear max velocity: one stored revision of [CONTROL] "
-    "(0053ec4236b79893c883d6679aff29f6f428dbdb) has 3.0 m/s, another "
-    "(a087a3dcc5b95b2350a3b1a851f551f8078fa539) has 1.0 m/s; 1.0 m/s matches [MANUAL].",
-    "ROS 2 limits ([CONTROL2]) are lower: 1.0 m/s^2 linear, 1.0 rad/s and 1.0 rad/s^2 angular.",
-    "Width: wheels outer faces span 0.5708 + 0.1143 = 0.685 m vs [MANUAL] 0.670 m; height of "
-    "the collision model is 0.380 m vs [MANUAL] 0.390 m (top plate/rails not modelled).",
-)
+ANGULAR_MAX_ACCELERATION_RADPS2: float = ROS1_DIFF_DRIVE.angular_max_acceleration_radps2  # [CONTROL]
+MOTOR_TORQUE_CONSTANT_NM_PER_A: float = HUSKY.motor.torque_constant_nm_per_a  # [MOTOR]
+MOTOR_GEAR_RATIO: float = HUSKY.motor.gear_ratio  # [MOTOR]
+MOTOR_CONTINUOUS_CURRENT_A: float = HUSKY.motor.continuous_current_a  # [MOTOR]
+MOTOR_CURRENT_LIMIT_A: float = HUSKY.motor.current_limit_a  # [MOTOR]
+MOTOR_GEARBOX_EFFICIENCY: float = HUSKY.motor.gearbox_efficiency  # ours, see the specs file
+KNOWN_DISCREPANCIES: tuple[str, ...] = HUSKY.known_discrepancies

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import re
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -167,6 +168,21 @@ def test_controller_figures() -> None:
     assert specs.ROS1_DIFF_DRIVE.effective_wheel_separation_m(specs.TRACK_WIDTH_M) == (
         pytest.approx(0.5708 * 1.875)
     )
+
+
+def test_the_specs_file_names_a_source_for_every_tag_and_rejects_a_missing_figure(tmp_path: Path) -> None:
+    """Every [TAG] in the specs file is one of its sources; a figure left out (or one too many)
+    is a one-line error naming the file, the section and the field."""
+    text = specs.SPECS_FILE.read_text()
+    tags = set(re.findall(r"\[([A-Z0-9]+)\]", text))
+    assert tags and tags <= set(specs.HUSKY.sources), tags - set(specs.HUSKY.sources)
+    broken = tmp_path / "specs.yaml"
+    broken.write_text(text.replace("  wheel_mass_kg: 2.637", "  wheel_mass_kgs: 2.637"))
+    with pytest.raises(ValueError, match=r"specs.yaml: description: .*check wheel_mass_kgs$"):
+        specs.load_specs(broken)
+    broken.write_text(text.replace("  gear_ratio: 78.71", ""))
+    with pytest.raises(ValueError, match=r"specs.yaml: motor: .*check gear_ratio$"):
+        specs.load_specs(broken)
 
 
 # ----------------------------------------------------------------------------- PyBullet
