@@ -1,4 +1,5 @@
-"""Reading and writing scenario files: the one place that turns bytes into plain data and back.
+"""Reading and writing the project's YAML files (scenarios, and the robot's data files: its specs,
+grounds and yaw response): the one place that turns bytes into plain data and back.
 
 Reading is defensive, because a scenario file is user input: only a regular file of at most
 `MAX_FILE_BYTES` is opened (a directory, FIFO or device is refused without blocking on it), it
@@ -148,7 +149,7 @@ def read_scenario_data(path: Path) -> dict[str, Any]:
     except RecursionError:  # _check_shape bounds the depth; kept as a last line of defence
         raise ScenarioFileError(f"{path}: nested too deeply to read") from None
     if not isinstance(data, dict):
-        raise ScenarioFileError(f"{path}: expected a mapping of scenario fields at the top level")
+        raise ScenarioFileError(f"{path}: expected a mapping of fields at the top level")
     _check_size(path, data)
     return data
 
@@ -156,5 +157,5 @@ def read_scenario_data(path: Path) -> dict[str, Any]:
 def scenario_yaml(data: dict[str, Any], header: str = "") -> str:
     """A scenario's plain data (`Scenario.model_dump(mode="json")`) as YAML text, with an
     optional comment header; `read_scenario_data` reads it back to the same values."""
-    comment = "".join(f"# {line}\n" for line in header.splitlines())
+    comment = "".join(f"# {line}\n" if line else "#\n" for line in header.splitlines())
     return comment + yaml.safe_dump(data, sort_keys=False, allow_unicode=True)

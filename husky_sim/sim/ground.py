@@ -14,9 +14,8 @@ import functools
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
-import yaml
-
 from husky_sim.paths import ASSETS_DIR
+from husky_sim.scenario_file import ScenarioFileError, read_scenario_data, scenario_yaml
 from husky_sim.sim.tyre import TyreContact
 
 GROUNDS_DIR: Path = ASSETS_DIR / "grounds"
@@ -142,9 +141,9 @@ def _load_ground(resolved: str, stamp_ns: int) -> Ground:
     rewrites in the same process is read again)."""
     path = Path(resolved)
     try:
-        data = yaml.safe_load(path.read_text())
-    except (OSError, yaml.YAMLError) as exc:
-        raise GroundError(f"{path}: cannot read the ground file ({' '.join(str(exc).split())})") from None
+        data = read_scenario_data(path)  # the project's one YAML reader
+    except ScenarioFileError as exc:
+        raise GroundError(f"{exc} (a ground file)") from None
     return Ground.from_dict(data, str(path))
 
 
@@ -153,5 +152,4 @@ def write_ground(ground: Ground, path: Path, header: str = "", fit: dict[str, ob
     data = ground.to_dict()
     if fit:
         data["fit"] = fit
-    comment = "".join(f"# {line}\n" if line else "#\n" for line in header.splitlines())
-    path.write_text(comment + yaml.safe_dump(data, sort_keys=False))
+    path.write_text(scenario_yaml(data, header))
