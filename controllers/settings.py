@@ -28,15 +28,18 @@ class Range:
     integer: bool = False
 
     def contains(self, value: float) -> bool:
-        if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
+        if isinstance(value, bool) or not isinstance(value, int | float):
             return False
         if self.integer and not isinstance(value, int):
+            return False
+        if isinstance(value, float) and not math.isfinite(value):
             return False
         return (value > self.lo if self.lo_open else value >= self.lo) and value <= self.hi
 
     def text(self) -> str:
+        """'[lo, hi] unit' ('(lo, hi]' when lo is open), in full up to ten digits."""
         unit = f" {self.unit}" if self.unit else ""
-        return f"{'(' if self.lo_open else '['}{self.lo:g}, {self.hi:g}]{unit}"
+        return f"{'(' if self.lo_open else '['}{self.lo:.10g}, {self.hi:.10g}]{unit}"
 
 
 def setting(default: object, lo: float, hi: float, unit: str = "", *, lo_open: bool = False) -> object:

@@ -34,7 +34,9 @@ from pydantic import (
 )
 
 from controllers import NMPCConfig
+from controllers.settings import Range
 from husky_sim.paths import SCENARIO_DIR
+from husky_sim.runs.ranged import ranged
 from husky_sim.runs.settings_schema import settings_fields
 from husky_sim.scenario_file import ScenarioFileError, read_scenario_data
 from husky_sim.sim.drive import DriveConfig
@@ -70,30 +72,9 @@ class ScenarioError(ValueError):
     """A scenario that cannot run; the message is one line naming the field."""
 
 
-def _range_text(lo: float, hi: float, unit: str, lo_open: bool) -> str:
-    unit_text = f" {unit}" if unit else ""
-    return f"{'(' if lo_open else '['}{lo:.10g}, {hi:.10g}]{unit_text}"
-
-
 def _real(lo: float, hi: float, unit: str = "", *, lo_open: bool = False) -> Any:
-    """A float field: a number (not a bool or a string), finite, in [lo, hi] (or (lo, hi]); the
-    error names the range."""
-    allowed = f"must be a finite number in {_range_text(lo, hi, unit, lo_open)}"
-
-    def check(value: object) -> float:
-        if isinstance(value, bool) or not isinstance(value, int | float):
-            raise ValueError(allowed)
-        try:
-            number = float(value)
-        except OverflowError:  # an integer beyond any float
-            raise ValueError(allowed) from None
-        if not (math.isfinite(number) and (number > lo if lo_open else number >= lo) and number <= hi):
-            raise ValueError(allowed)
-        return number
-
-    # the range also goes into the JSON schema, which the docs' scenario reference is made from
-    shown = Field(json_schema_extra={"range": _range_text(lo, hi, unit, lo_open)})
-    return Annotated[float, BeforeValidator(check), shown]
+    """A float field: a finite number in [lo, hi] (or (lo, hi]); the error names the range."""
+    return ranged(Range(lo, hi, unit, lo_open))
 
 
 #: The longest prediction horizon N (steps) a scenario, a command-line override or a check takes.
@@ -102,15 +83,7 @@ MAX_HORIZON = 50
 
 def _whole(lo: int, hi: int, unit: str = "") -> Any:
     """An integer field in [lo, hi] (bools and floats such as 5.0 are not integers here)."""
-    allowed = f"must be an integer in {_range_text(lo, hi, unit, False)}"
-
-    def check(value: object) -> int:
-        if isinstance(value, bool) or not isinstance(value, int) or not lo <= value <= hi:
-            raise ValueError(allowed)
-        return value
-
-    shown = Field(json_schema_extra={"range": _range_text(lo, hi, unit, False)})  # for the docs
-    return Annotated[int, BeforeValidator(check), shown]
+    return ranged(Range(lo, hi, unit, integer=True))
 
 
 def _name(value: object) -> str:

@@ -7,43 +7,17 @@ config, and the schema cannot drift from it."""
 from __future__ import annotations
 
 import dataclasses
-from typing import Annotated, Any
+from typing import Any
 
-from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, StrictBool, create_model
+from pydantic import BaseModel, ConfigDict, Field, StrictBool, create_model
 
 from controllers import registry
-from controllers.settings import Range, nested_settings
+from controllers.settings import nested_settings
+from husky_sim.runs.ranged import ranged
 
 
 class _Settings(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True)
-
-
-def _field_type(allowed: Range, default: object) -> Any:
-    """An optional field taking what `allowed` contains (one value, or a tuple of them as long as
-    the default); None: not given. The error names the range."""
-    length = len(default) if isinstance(default, tuple) else None
-    kind = "an integer" if allowed.integer else "a finite number"
-    message = f"must be {kind} in {allowed.text()}"
-    if length is not None:
-        message = f"must be {length} entries, each {kind} in {allowed.text()}"
-
-    def check(value: object) -> object:
-        if value is None:
-            return None
-        values = value if length is not None else (value,)
-        if length is not None and (not isinstance(value, list | tuple) or len(value) != length):
-            raise ValueError(message)
-        if not all(allowed.contains(v) for v in values):
-            raise ValueError(message)
-        if length is not None:
-            return tuple(float(v) for v in values)
-        return value if allowed.integer else float(value)
-
-    number: Any = int if allowed.integer else float
-    kind_type: Any = tuple[(number,) * length] if length is not None else number
-    shown = Field(default=None, json_schema_extra={"range": allowed.text()})  # for the docs
-    return Annotated[kind_type | None, BeforeValidator(check), shown]
 
 
 def _model(config: type, name: str) -> type[BaseModel]:
@@ -57,7 +31,8 @@ def _model(config: type, name: str) -> type[BaseModel]:
             sub = _model(nested[f.name], f"{name}_{f.name}")
             fields[f.name] = (sub | None, None)
         elif allowed is not None:
-            fields[f.name] = (_field_type(allowed, f.default), None)
+            length = len(f.default) if isinstance(f.default, tuple) else None
+            fields[f.name] = (ranged(allowed, length, optional=True), None)
         elif isinstance(f.default, bool):
             fields[f.name] = (StrictBool | None, None)
     return create_model(name, __base__=_Settings, __doc__=(config.__doc__ or "").strip(), **fields)
