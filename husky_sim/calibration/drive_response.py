@@ -15,10 +15,11 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 from husky_sim.calibration.recordings import MIN_RATIO_SPEED_MPS, MIN_RATIO_YAW_RADPS, rise_times
+from husky_sim.paths import DEFAULT_ROBOT
 from husky_sim.sim.drive import DriveConfig
-from husky_sim.sim.geometry import load_geometry
 from husky_sim.sim.ground import Ground
 from husky_sim.sim.open_loop import SimTrack, simulate_commands
+from husky_sim.sim.robot_description import load_robot
 from husky_sim.sim.world import WorldConfig
 
 #: Hold of each command from rest (s): the real recordings hold each command for 6 s.
@@ -50,10 +51,10 @@ def ratio(numerator: float, denominator: float, floor: float) -> float | None:
     return numerator / denominator if abs(denominator) >= floor else None
 
 
-def implied_body_velocity(wheel_speeds: np.ndarray) -> tuple[float, float]:
-    """(v m/s, w rad/s) that wheel speeds (rad/s; left joints, then right) imply with the URDF's
-    wheel radius and track."""
-    geometry = load_geometry()
+def implied_body_velocity(wheel_speeds: np.ndarray, robot: str = DEFAULT_ROBOT) -> tuple[float, float]:
+    """(v m/s, w rad/s) that wheel speeds (rad/s; left joints, then right) imply with the robot's
+    URDF wheel radius and track."""
+    geometry = load_robot(robot).geometry
     speeds = np.asarray(wheel_speeds, dtype=float)
     half = speeds.shape[-1] // 2
     left, right = float(np.mean(speeds[..., :half])), float(np.mean(speeds[..., half:]))
@@ -61,11 +62,13 @@ def implied_body_velocity(wheel_speeds: np.ndarray) -> tuple[float, float]:
     return r * (right + left) / 2.0, r * (right - left) / track
 
 
-def steady_answer(track: SimTrack, command: tuple[float, float], steady_from_s: float) -> ResponseRow:
-    """The row of a track that held `command` from t = 0, steady from `steady_from_s` (s)."""
+def steady_answer(
+    track: SimTrack, command: tuple[float, float], steady_from_s: float, robot: str = DEFAULT_ROBOT
+) -> ResponseRow:
+    """The row of a track of `robot` that held `command` from t = 0, steady from `steady_from_s` (s)."""
     late = track.t_s >= steady_from_s
     v, w = (float(x) for x in np.mean(track.body_velocity[late], axis=0))
-    v_wheels, w_wheels = implied_body_velocity(np.mean(track.wheel_speeds[late], axis=0))
+    v_wheels, w_wheels = implied_body_velocity(np.mean(track.wheel_speeds[late], axis=0), robot)
     times = rise_times(track.t_s, track.body_velocity[:, 1], 0.0, w) if abs(w) > 1e-3 else None
     t63, t95 = (None, None) if times is None else (times.t63_s, times.t95_s)
     return ResponseRow(
@@ -91,9 +94,10 @@ def drive_response(
     hold_s: float = HOLD_S,
     drive: DriveConfig | None = None,
     physics_hz: float = WorldConfig.physics_hz,
+    robot: str = DEFAULT_ROBOT,
 ) -> list[ResponseRow]:
-    """Each (v m/s, w rad/s) command held from rest on `ground` for `hold_s` through the drive
-    (its limits, the ground's drive response, the motors, the tyres)."""
+    """Each (v m/s, w rad/s) command held from rest on `ground` for `hold_s` through the robot's
+    drive (its limits, the ground's drive response, the motors, the tyres)."""
     if not (0.5 <= hold_s <= 60.0 and math.isfinite(hold_s)):
         raise ValueError(f"hold_s: must be in [0.5, 60] s, got {hold_s}")
     rows = []
@@ -108,8 +112,9 @@ def drive_response(
             drive=drive,
             ground=ground,
             payload_kg=payload_kg,
+            robot=robot,
         )
-        rows.append(steady_answer(track, command, 0.5 * hold_s))
+        rows.append(steady_answer(track, command, 0.5 * hold_s, robot))
     return rows
 
 

@@ -5,19 +5,23 @@ from __future__ import annotations
 import argparse
 
 from husky_sim.cli.common import UsageError, path_arg
+from husky_sim.paths import DEFAULT_ROBOT
 
 
 def cmd_identify(args: argparse.Namespace) -> int:
     from pathlib import Path
 
-    from husky_sim.sim.yaw_response import DEFAULT_FILE, identify_in_simulation, write_identification
+    from husky_sim.sim.robot_description import load_robot
+    from husky_sim.sim.yaw_response import identify_in_simulation, write_identification
 
-    identification = identify_in_simulation()
+    robot = load_robot(args.robot)
+    identification = identify_in_simulation(robot=robot.name)
     print("\n".join(identification.lines()))
-    out = Path(args.out) if args.out else DEFAULT_FILE
-    command = "husky-sim identify" + ("" if args.out is None else f" --out {args.out}")
+    out = Path(args.out) if args.out else robot.yaw_response_file
+    command = "husky-sim identify" + ("" if robot.name == DEFAULT_ROBOT else f" --robot {robot.name}")
+    command += "" if args.out is None else f" --out {args.out}"
     try:
-        write_identification(identification, out, command)
+        write_identification(identification, out, command, robot.title)
     except OSError as exc:
         raise UsageError(f"identify: cannot write {out} ({exc.strerror or exc})") from None
     print(f"-> {out}")
@@ -33,6 +37,9 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
         "--out",
         type=path_arg,
         default=None,
-        help="YAML file to write (default assets/husky_a200/yaw_response.yaml, the scenarios' default)",
+        help="YAML file to write (default: the robot folder's yaw_response.yaml, the scenarios' default)",
+    )
+    identify.add_argument(
+        "--robot", default=DEFAULT_ROBOT, help=f"the robot's folder under assets/ (default {DEFAULT_ROBOT})"
     )
     identify.set_defaults(func=cmd_identify)

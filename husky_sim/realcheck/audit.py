@@ -33,8 +33,6 @@ from controllers.registry import BodyDiscs, PlanProfile
 from husky_sim.runs.scenario import Scenario
 from husky_sim.sim import specs as specs
 from husky_sim.sim.drive import DriveConfig
-from husky_sim.sim.geometry import load_geometry
-from husky_sim.sim.ground import load_ground
 from husky_sim.sim.kinematic import run_kinematic
 from husky_sim.sim.metrics import solver_times
 
@@ -64,19 +62,25 @@ class Finding:
         return asdict(self)
 
 
-def spec_sheet_half_diagonal_m() -> float:
-    """Half the diagonal of the spec sheet's 990 x 670 mm outline (bumpers included), m."""
-    sheet = specs.HUSKY_SPEC_SHEET
+def spec_sheet_half_diagonal_m(scenario: Scenario) -> float:
+    """Half the diagonal of the robot's spec-sheet outline (the Husky's 990 x 670 mm, bumpers
+    included), m."""
+    sheet = _published(scenario).spec_sheet
     return 0.5 * math.hypot(sheet.length_m, sheet.width_m)
 
 
+def _published(scenario: Scenario) -> specs.RobotSpecs:
+    """The published figures of the scenario's robot (its specs.yaml)."""
+    return scenario.robot.description().specs
+
+
 def drive_config(scenario: Scenario) -> DriveConfig:
-    return scenario.drive.config()
+    return scenario.drive_config()
 
 
 def radius_margin_m(scenario: Scenario) -> float:
     """Controller circle radius minus the URDF footprint radius, m (negative: smaller than the body)."""
-    return scenario.robot.radius() - load_geometry().footprint_radius_m
+    return scenario.robot.radius() - scenario.robot.description().geometry.footprint_radius_m
 
 
 def needed_margin_m(scenario: Scenario, t: AuditThresholds) -> float:
@@ -98,8 +102,9 @@ def _thin_margin(text: str, needed: float, t: AuditThresholds, values: dict[str,
 
 def check_robot_radius(scenario: Scenario, t: AuditThresholds) -> Finding:
     r = scenario.robot.radius()
-    footprint = load_geometry().footprint_radius_m
-    outline = spec_sheet_half_diagonal_m()
+    footprint = scenario.robot.description().geometry.footprint_radius_m
+    outline = spec_sheet_half_diagonal_m(scenario)
+    title, sheet = scenario.robot.description().title, _published(scenario).spec_sheet
     needed = needed_margin_m(scenario, t)
     margin = r - footprint
     values = {
@@ -113,7 +118,7 @@ def check_robot_radius(scenario: Scenario, t: AuditThresholds) -> Finding:
         return Finding(
             "robot radius",
             "fail",
-            f"{text}: the controller's circle is smaller than the Husky; constraints satisfied can "
+            f"{text}: the controller's circle is smaller than the {title}; constraints satisfied can "
             "still mean contact",
             values,
         )
@@ -123,7 +128,8 @@ def check_robot_radius(scenario: Scenario, t: AuditThresholds) -> Finding:
         return Finding(
             "robot radius",
             "warn",
-            f"{text}: covers the URDF but not the spec sheet's 990 x 670 mm outline "
+            f"{text}: covers the URDF but not the spec sheet's {1000 * sheet.length_m:.0f} x "
+            f"{1000 * sheet.width_m:.0f} mm outline "
             f"(half-diagonal {outline:.3f} m, bumpers/accessories)",
             values,
         )
@@ -135,9 +141,11 @@ def check_velocity_limits(scenario: Scenario, omega_max_radps: float | None = No
     own yaw-rate bound where it is not the scenario's (husky-cbf commands up to the drive's)."""
     c, drive = scenario.controller, drive_config(scenario)
     omega_max = c.omega_max_radps if omega_max_radps is None else omega_max_radps
-    v_pub = specs.MAX_SPEED_MPS  # [MANUAL] and [CONTROL] agree: 1.0 m/s
-    w_pub = specs.ANGULAR_MAX_VELOCITY_RADPS  # [CONTROL] ROS 1: 2.0 rad/s
-    w_ros2 = specs.ROS2_DIFF_DRIVE.angular_max_velocity_radps
+    published = _published(scenario)
+    v_pub = published.spec_sheet.max_speed_mps  # [MANUAL] (the Husky's: 1.0 m/s, [CONTROL] agrees)
+    w_pub = published.ros1_diff_drive.angular_max_velocity_radps  # [CONTROL] ROS 1
+    w_ros2 = published.ros2_diff_drive.angular_max_velocity_radps
+    title = scenario.robot.description().title
     v_limit, w_limit = min(v_pub, drive.max_linear_mps), min(w_pub, drive.max_angular_radps)
     v_abs = max(c.v_max_mps, -c.v_min_mps)
     values = {
@@ -151,7 +159,7 @@ def check_velocity_limits(scenario: Scenario, omega_max_radps: float | None = No
     }
     text = (
         f"NMPC v in [{c.v_min_mps:g}, {c.v_max_mps:g}] m/s, |omega| <= {omega_max:.3f} rad/s; "
-        f"Husky {v_pub:g} m/s, {w_pub:g} rad/s (ROS 1; ROS 2: {w_ros2:g} rad/s); "
+        f"{title} {v_pub:g} m/s, {w_pub:g} rad/s (ROS 1; ROS 2: {w_ros2:g} rad/s); "
         f"drive {drive.max_linear_mps:g} m/s, {drive.max_angular_radps:g} rad/s"
     )
     if v_abs > v_limit + 1e-9 or omega_max > w_limit + 1e-9:
@@ -172,9 +180,9 @@ def check_acceleration(scenario: Scenario) -> Finding:
     dv = c.v_max_mps - c.v_min_mps  # worst one-step change of the linear command, m/s
     dw = 2.0 * c.omega_max_radps  # rad/s
     a_implied, alpha_implied = dv / tau, dw / tau
-    a_pub, alpha_pub = specs.LINEAR_MAX_ACCELERATION_MPS2, specs.ANGULAR_MAX_ACCELERATION_RADPS2
+    ros1, ros2 = _published(scenario).ros1_diff_drive, _published(scenario).ros2_diff_drive
+    a_pub, alpha_pub = ros1.linear_max_acceleration_mps2, ros1.angular_max_acceleration_radps2
     a_drive, alpha_drive = drive.max_linear_accel_mps2, drive.max_angular_accel_radps2
-    ros2 = specs.ROS2_DIFF_DRIVE
     lag_m = c.v_max_mps**2 / (2.0 * a_drive)  # distance the robot trails a plan that jumps 0 -> v_max
     values = {
         "implied_linear_accel_mps2": a_implied,
@@ -235,7 +243,8 @@ def check_planned_acceleration(scenario: Scenario, name: str, accel: tuple[float
     against the drive's."""
     drive = drive_config(scenario)
     linear, angular = accel
-    a_pub, alpha_pub = specs.LINEAR_MAX_ACCELERATION_MPS2, specs.ANGULAR_MAX_ACCELERATION_RADPS2
+    ros1 = _published(scenario).ros1_diff_drive
+    a_pub, alpha_pub = ros1.linear_max_acceleration_mps2, ros1.angular_max_acceleration_radps2
     values = {
         "planned_linear_accel_mps2": linear,
         "planned_angular_accel_radps2": angular,
@@ -310,7 +319,7 @@ def stopping_distance_m(scenario: Scenario) -> tuple[float, float, float]:
 def dead_time_m(scenario: Scenario) -> float:
     """Distance (m) the robot covers at v_max during its ground's drive dead time (a calibrated
     ground's is the real drive's: 0.34 s on wet grass), before it acts on a command to stop."""
-    return scenario.controller.v_max_mps * load_ground(scenario.ground).drive.command_delay_s
+    return scenario.controller.v_max_mps * scenario.ground_config().drive.command_delay_s
 
 
 def check_stopping_distance(scenario: Scenario) -> Finding:

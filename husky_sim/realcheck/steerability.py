@@ -29,6 +29,7 @@ def steerability(scenario: Scenario) -> dict[str, float | None]:
         hold_s=PROBE_HOLD_S,
         drive=episode.drive,
         physics_hz=episode.world.physics_hz,
+        robot=episode.robot,
     )
     return {
         "turn_in_place_radps": in_place.w,

@@ -40,8 +40,6 @@ import numpy as np
 from husky_sim.realcheck.steerability import steerability
 from husky_sim.runs.parallel import Backend, parallel_map
 from husky_sim.runs.scenario import Scenario, scenario_from_data
-from husky_sim.sim.geometry import load_geometry
-from husky_sim.sim.ground import load_ground
 from husky_sim.sim.tyre import stiffness_ratio_for_yaw_ratio
 
 #: Per-sample result keys that are wall-clock measurements (excluded from determinism checks).
@@ -140,7 +138,7 @@ def sample_perturbations(ranges: PerturbationRanges, count: int, seed: int) -> l
 
 def nominal_current_a(scenario: Scenario) -> float:
     """The scenario's motor current limit (A): its drive override or the MotorConfig default."""
-    return scenario.drive.config().motor.current_limit_a
+    return scenario.drive_config().motor.current_limit_a
 
 
 def apply_perturbation(scenario: Scenario, p: Perturbation) -> Scenario:
@@ -152,11 +150,11 @@ def apply_perturbation(scenario: Scenario, p: Perturbation) -> Scenario:
     data["friction"]["ground"] = p.ground_friction
     data["robot"]["payload_kg"] = p.payload_kg
     data["drive"]["current_limit_a"] = nominal_current_a(scenario) * p.torque_scale
-    ground = load_ground(scenario.ground)
+    ground = scenario.ground_config()
     if ground.calibrated:  # the uncalibrated plant has no tyre stiffness to set
         rolling = ground.tyre.rolling_radius_scale
         data["friction"]["lateral_stiffness_ratio"] = stiffness_ratio_for_yaw_ratio(
-            p.yaw_ratio, load_geometry(), rolling
+            p.yaw_ratio, scenario.robot.description().geometry, rolling
         )
     data["sensing"].update(
         latency_steps=p.latency_steps,

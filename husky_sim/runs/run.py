@@ -16,7 +16,6 @@ from husky_sim.runs.run_folder import LOG_FILE, TRACE_FILE, prepare_out_dir, wri
 from husky_sim.runs.scenario import Scenario, load_scenario
 from husky_sim.runs.summary import KinematicMetrics, Model, RunSettings, RunSummary
 from husky_sim.sim.episode import run_episode
-from husky_sim.sim.geometry import load_geometry
 
 if TYPE_CHECKING:
     from husky_sim.runs.foxglove_record import FoxgloveRecorder
@@ -55,6 +54,7 @@ def run_settings(sc: Scenario, controller: str, model: Model = "physics") -> tup
         v_max_mps=nmpc_config.v_max_mps,
         omega_max_radps=omega_max,
         solver=nmpc_config.solver.backend,
+        robot=sc.robot.model,
     )
     return settings, nmpc_config.robot_radius_m
 
@@ -137,7 +137,7 @@ def _recorder(
         reference,
         [o.radius_m for o in specs],
         [o.height_m for o in specs],
-        load_geometry().footprint_half_extents_m,
+        sc.robot.description().geometry.footprint_half_extents_m,
         sc.tau_s,
         sc.duration_s,
         live_port,

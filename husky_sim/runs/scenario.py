@@ -35,19 +35,18 @@ from pydantic import (
 
 from controllers import NMPCConfig
 from controllers.settings import Range
-from husky_sim.paths import SCENARIO_DIR
+from husky_sim.paths import DEFAULT_ROBOT, SCENARIO_DIR
 from husky_sim.runs.ranged import ranged
 from husky_sim.runs.settings_schema import settings_fields
 from husky_sim.scenario_file import ScenarioFileError, read_scenario_data
 from husky_sim.sim.drive import DriveConfig
 from husky_sim.sim.episode import EpisodeConfig
-from husky_sim.sim.geometry import load_geometry
-from husky_sim.sim.ground import DEFAULT_GROUND, DRIVE_TIME_BOUNDS_S, load_ground
+from husky_sim.sim.ground import DRIVE_TIME_BOUNDS_S, Ground, load_ground
 from husky_sim.sim.kinematic import KinematicProblem
 from husky_sim.sim.outcomes import Outcomes
+from husky_sim.sim.robot_description import RobotDescription, load_robot, robot_names
 from husky_sim.sim.sensing import SensingConfig
 from husky_sim.sim.world import ObstacleSpec, WorldConfig
-from husky_sim.sim.yaw_response import DEFAULT_FILE as YAW_RESPONSE_FILE
 from husky_sim.sim.yaw_response import GAIN_BOUNDS, TIME_CONSTANT_BOUNDS_S, YawResponse
 
 if TYPE_CHECKING:
@@ -234,12 +233,13 @@ class YawResponseSpec(_Strict):
 
 
 @functools.cache
-def identified_yaw_response() -> YawResponse:
-    """The yaw lag identified in PyBullet (`husky-sim identify`), read once from YAW_RESPONSE_FILE;
-    a missing or malformed file is a one-line ScenarioError."""
-    source = f"{YAW_RESPONSE_FILE} (the identified yaw response; `husky-sim identify` writes it)"
+def identified_yaw_response(robot: str = DEFAULT_ROBOT) -> YawResponse:
+    """The robot's yaw lag identified in PyBullet (`husky-sim identify`), read once from its
+    folder's yaw_response.yaml; a missing or malformed file is a one-line ScenarioError."""
+    path = load_robot(robot).yaw_response_file
+    source = f"{path} (the identified yaw response; `husky-sim identify` writes it)"
     try:
-        data = read_scenario_data(YAW_RESPONSE_FILE)
+        data = read_scenario_data(path)
     except ScenarioFileError as exc:
         raise ScenarioError(f"{exc} (`husky-sim identify` writes it)") from None
     wanted = {key: data[key] for key in YawResponseSpec.model_fields if key in data}
@@ -249,14 +249,23 @@ def identified_yaw_response() -> YawResponse:
         raise ScenarioError(_one_line(exc, source)) from None
 
 
-class RobotSpec(_Strict):
-    """Start pose and the controller's robot circle: the URDF footprint radius plus a margin, or
-    an explicit radius (a radius below the footprint is flagged in every summary)."""
+def _robot_name(value: object) -> str:
+    if not isinstance(value, str) or value not in robot_names():
+        raise ValueError(f"must name a robot folder under assets/ ({', '.join(robot_names())})")
+    return value
 
+
+class RobotSpec(_Strict):
+    """Which robot (its folder under assets/: the Husky A200 unless named), its start pose and the
+    controller's robot circle: the URDF footprint radius plus a margin, or an explicit radius (a
+    radius below the footprint is flagged in every summary)."""
+
+    model: Annotated[str, BeforeValidator(_robot_name)] = DEFAULT_ROBOT
     start: Pose
     radius_margin_m: _real(0.0, 2.0, "m") | None = None
     radius_m: _real(0.0, 5.0, "m", lo_open=True) | None = None
-    payload_kg: _real(0.0, 75.0, "kg") = 0.0  # Husky maximum payload 75 kg
+    #: kg on the top plate, up to the robot's published maximum payload (specs.yaml)
+    payload_kg: _real(0.0, 1000.0, "kg") = 0.0
     yaw_response: YawResponseSpec | None = None  # default: the lag identified in PyBullet
 
     @model_validator(mode="after")
@@ -265,17 +274,28 @@ class RobotSpec(_Strict):
             raise ValueError("give exactly one of radius_m or radius_margin_m")
         return self
 
+    @model_validator(mode="after")
+    def _payload_carried(self) -> RobotSpec:
+        most = self.description().specs.spec_sheet.max_payload_kg
+        if self.payload_kg > most:
+            raise ValueError(f"payload_kg: at most {most:g} kg on a {self.description().title}")
+        return self
+
+    def description(self) -> RobotDescription:
+        """The robot's folder, loaded (husky_sim.sim.robot_description)."""
+        return load_robot(self.model)
+
     def radius(self) -> float:
         if self.radius_m is not None:
             return self.radius_m
-        return load_geometry().footprint_radius_m + self.radius_margin_m
+        return self.description().geometry.footprint_radius_m + self.radius_margin_m
 
     def yaw_response_params(self) -> YawResponse:
         """The robot's yaw-rate lag (gain, time constant s): the file's `yaw_response`, else the
-        default identified in PyBullet (assets/husky_a200/yaw_response.yaml)."""
+        one identified in PyBullet (its folder's yaw_response.yaml)."""
         if self.yaw_response is not None:
             return self.yaw_response.params()
-        return identified_yaw_response()
+        return identified_yaw_response(self.model)
 
 
 class NMPCSpec(_Strict):
@@ -322,10 +342,11 @@ class DriveSpec(_Strict):
     #: the motor controller's current limit per side (A); it sets the wheels' torque limit
     current_limit_a: _real(0.1, 500.0, "A") | None = None
 
-    def config(self) -> DriveConfig:
+    def config(self, robot: str = DEFAULT_ROBOT) -> DriveConfig:
+        """The robot's published drive with these overrides."""
         limits = self.model_dump(exclude_none=True)
         current = limits.pop("current_limit_a", None)
-        base = DriveConfig(**limits)
+        base = dataclasses.replace(DriveConfig.for_robot(load_robot(robot).specs), **limits)
         if current is None:
             return base
         return dataclasses.replace(base, motor=dataclasses.replace(base.motor, current_limit_a=current))
@@ -380,8 +401,9 @@ class Scenario(_Strict):
     random_obstacles: RandomObstacles | None = None
     controller: ControllerSpec = ControllerSpec()
     drive: DriveSpec = DriveSpec()
-    #: a shipped ground's name (assets/husky_a200/grounds) or a ground file's path
-    ground: Annotated[str, Field(min_length=1, max_length=500)] = DEFAULT_GROUND
+    #: a ground shipped for the robot (its folder's grounds/) or a ground file's path; omitted: the
+    #: robot's default ground (its robot.yaml)
+    ground: Annotated[str, Field(min_length=1, max_length=500)] | None = None
     friction: FrictionSpec = FrictionSpec()
     sensing: SensingSpec = SensingSpec()
     success: SuccessSpec = SuccessSpec()
@@ -405,7 +427,7 @@ class Scenario(_Strict):
 
     @model_validator(mode="after")
     def _ground_known(self) -> Scenario:
-        ground = load_ground(self.ground)  # a GroundError (a ValueError) names the ground and what is wrong
+        ground = self.ground_config()  # a GroundError (a ValueError) names the ground and what is wrong
         if not ground.calibrated and self.friction.lateral_stiffness_ratio is not None:
             raise ValueError(
                 f"friction.lateral_stiffness_ratio: ground {self.ground!r} has no tyre model (contact "
@@ -482,6 +504,14 @@ class Scenario(_Strict):
         from husky_sim.runs import scenario_configs
 
         return scenario_configs.kinematic_problem(self, robot_radius_m, allow_waypoints)
+
+    def ground_config(self) -> Ground:
+        """The ground the robot drives on: the named one of its robot, else its default."""
+        return load_ground(self.ground, self.robot.model)
+
+    def drive_config(self) -> DriveConfig:
+        """The robot's drive with the file's overrides."""
+        return self.drive.config(self.robot.model)
 
     def reference_object(self) -> Reference:
         from husky_sim.runs import scenario_configs

@@ -12,8 +12,7 @@ from controllers import CircleTrajectory, Controller, NMPCConfig, Reference, Set
 from controllers.registry import ControllerInputs, PlanProfile, RobotFacts
 from husky_sim.runs.settings_schema import given_settings
 from husky_sim.sim.episode import EpisodeConfig
-from husky_sim.sim.geometry import load_geometry
-from husky_sim.sim.ground import load_ground, with_friction
+from husky_sim.sim.ground import with_friction
 from husky_sim.sim.kinematic import KinematicProblem
 from husky_sim.sim.outcomes import Outcomes
 from husky_sim.sim.sensing import SensingConfig
@@ -75,9 +74,9 @@ def nmpc_config(sc: Scenario) -> NMPCConfig:
 def robot_facts(sc: Scenario) -> RobotFacts:
     """What a controller is told of the robot: the drive's limits, the identified yaw response, the
     URDF's footprint and the localisation's reported noise."""
-    drive = sc.drive.config()
+    drive = sc.drive_config()
     yaw = sc.robot.yaw_response_params()
-    geometry = load_geometry()
+    geometry = sc.robot.description().geometry
     return RobotFacts(
         max_linear_mps=drive.max_linear_mps,
         max_angular_radps=drive.max_angular_radps,
@@ -121,7 +120,7 @@ def make_controller(sc: Scenario, name: str) -> Controller:
 
 def episode_config(sc: Scenario) -> EpisodeConfig:
     """Everything the PyBullet episode needs besides the controller and the reference."""
-    ground = with_friction(load_ground(sc.ground), sc.friction.ground)
+    ground = with_friction(sc.ground_config(), sc.friction.ground)
     if sc.friction.lateral_stiffness_ratio is not None:
         tyre = dataclasses.replace(ground.tyre, lateral_stiffness_ratio=sc.friction.lateral_stiffness_ratio)
         ground = dataclasses.replace(ground, tyre=tyre)
@@ -134,10 +133,11 @@ def episode_config(sc: Scenario) -> EpisodeConfig:
             ground_friction=ground.tyre.friction,
             obstacles=tuple(sc.obstacle_specs()),
         ),
-        drive=sc.drive.config(),
+        drive=sc.drive_config(),
         ground=ground,
         sensing=SensingConfig(**sc.sensing.model_dump()),  # same field names
         outcomes=Outcomes(**sc.success.model_dump()),  # same field names
         payload_kg=sc.robot.payload_kg,
+        robot=sc.robot.model,
         seed=sc.seed,
     )

@@ -8,6 +8,7 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass
 from typing import Literal
 
+from husky_sim.paths import DEFAULT_ROBOT
 from husky_sim.sim.metrics import EpisodeMetrics
 
 Model = Literal["physics", "kinematic"]
@@ -29,6 +30,7 @@ class RunSettings:
     v_max_mps: float
     omega_max_radps: float  # the bound the controller commands within
     solver: str = "fatrop"  # the NLP backend it solved with (controllers.config.SOLVER_BACKENDS)
+    robot: str = DEFAULT_ROBOT  # the robot's folder under assets/ (husky_sim.sim.robot_description)
 
 
 @dataclass(frozen=True)

@@ -40,6 +40,20 @@ class MotorConfig:
     gearbox_efficiency: float = specs.MOTOR_GEARBOX_EFFICIENCY  # output / input power
     current_limit_a: float = specs.MOTOR_CURRENT_LIMIT_A  # the motor controller's limit (A)
     wheels_per_motor: int = 2
+    #: the robot's published current limit (A): what current_limit_a is scaled from (the check)
+    nominal_current_limit_a: float = specs.MOTOR_CURRENT_LIMIT_A
+
+    @classmethod
+    def for_robot(cls, robot: specs.RobotSpecs) -> MotorConfig:
+        """A robot's published gearmotor (its specs file's `motor`)."""
+        m = robot.motor
+        return cls(
+            m.torque_constant_nm_per_a,
+            m.gear_ratio,
+            m.gearbox_efficiency,
+            m.current_limit_a,
+            nominal_current_limit_a=m.current_limit_a,
+        )
 
     def __post_init__(self) -> None:
         checks = {
@@ -84,6 +98,20 @@ class DriveConfig:
     max_angular_accel_radps2: float = specs.ANGULAR_MAX_ACCELERATION_RADPS2  # rad/s^2
     motor: MotorConfig = field(default_factory=lambda: MotorConfig())
 
+    @classmethod
+    def for_robot(cls, robot: specs.RobotSpecs) -> DriveConfig:
+        """A robot's published drive: its ROS 1 diff_drive_controller limits and its gearmotor
+        (the defaults are the default robot's, the Husky's)."""
+        d = robot.ros1_diff_drive
+        return cls(
+            wheel_separation_multiplier=d.wheel_separation_multiplier,
+            max_linear_mps=d.linear_max_velocity_mps,
+            max_angular_radps=d.angular_max_velocity_radps,
+            max_linear_accel_mps2=d.linear_max_acceleration_mps2,
+            max_angular_accel_radps2=d.angular_max_acceleration_radps2,
+            motor=MotorConfig.for_robot(robot),
+        )
+
     def __post_init__(self) -> None:
         for name in (
             "wheel_separation_multiplier",
@@ -114,7 +142,7 @@ class SkidSteerDrive:
         self.side_torque_limit_nm = motor.side_torque_limit_nm
         if ground is not None and ground.wheel_torque_limit_nm is not None:
             # the uncalibrated plant's per-wheel literal, scaled as the current limit is (the check)
-            scale = motor.current_limit_a / specs.MOTOR_CURRENT_LIMIT_A
+            scale = motor.current_limit_a / motor.nominal_current_limit_a
             self.side_torque_limit_nm = ground.wheel_torque_limit_nm * scale * motor.wheels_per_motor
         self.wheel_radius_m = wheel_radius_m
         self.effective_separation_m = track_width_m * config.wheel_separation_multiplier

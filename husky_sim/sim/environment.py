@@ -20,6 +20,7 @@ import numpy as np
 from husky_sim.sim.collision import ClearanceMonitor
 from husky_sim.sim.drive import SkidSteerDrive
 from husky_sim.sim.robot import HuskyRobot
+from husky_sim.sim.robot_description import load_robot
 from husky_sim.sim.sensing import Measurement, Sensor
 from husky_sim.sim.world import World
 
@@ -42,7 +43,12 @@ class HuskyEnvironment:
         try:
             ground = config.ground
             self.robot = HuskyRobot(
-                self.world.client, config.start, ground.tyre, config.payload_kg, coulomb=not ground.calibrated
+                self.world.client,
+                config.start,
+                ground.tyre,
+                config.payload_kg,
+                coulomb=not ground.calibrated,
+                robot=load_robot(config.robot),
             )
             geometry = self.robot.geometry
             self.drive = SkidSteerDrive(config.drive, geometry.wheel_radius_m, geometry.track_width_m, ground)

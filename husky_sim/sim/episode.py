@@ -23,6 +23,7 @@ import numpy as np
 
 from controllers import Controller, Reference, SetPoint
 from husky_sim import interrupts
+from husky_sim.paths import DEFAULT_ROBOT
 from husky_sim.sim.drive import DriveConfig
 from husky_sim.sim.environment import HuskyEnvironment
 from husky_sim.sim.ground import Ground, load_ground
@@ -49,6 +50,7 @@ class EpisodeConfig:
     sensing: SensingConfig = field(default_factory=SensingConfig)
     outcomes: Outcomes = field(default_factory=Outcomes)
     payload_kg: float = 0.0
+    robot: str = DEFAULT_ROBOT  # the robot's folder under assets/ (husky_sim.sim.robot_description)
     deadline_mode: bool = False  # a solve slower than tau holds the previous command
     seed: int = 0
 

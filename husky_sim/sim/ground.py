@@ -1,11 +1,12 @@
 """Grounds: named, fitted parameter sets of the tyre contact and of the drive's response, each a
-folder assets/husky_a200/grounds/NAME/ holding ground.yaml and the calibration report it came
-with, both written by `husky-sim calibrate` from a real recording.
+folder grounds/NAME/ of a robot's folder (assets/husky_a200/grounds/wet_grass/) holding ground.yaml
+and the calibration report it came with, both written by `husky-sim calibrate` from a real
+recording.
 
 A ground file holds `tyre` (husky_sim.sim.tyre.TyreContact) and `drive` (the dead time and lag of
 the wheel speed loop: DriveResponse, which husky_sim.sim.drive.SkidSteerDrive applies), fitted
 together on one recording. A scenario names its ground (`ground: wet_grass`, or a path to a file);
-without one it gets DEFAULT_GROUND.
+without one it gets its robot's default ground (robot.yaml; DEFAULT_GROUND for the Husky).
 """
 
 from __future__ import annotations
@@ -14,15 +15,13 @@ import functools
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
-from husky_sim.paths import ASSETS_DIR
+from husky_sim.paths import DEFAULT_ROBOT
 from husky_sim.scenario_file import ScenarioFileError, read_scenario_data, scenario_yaml
+from husky_sim.sim.robot_description import load_robot
 from husky_sim.sim.tyre import TyreContact
 
-GROUNDS_DIR: Path = ASSETS_DIR / "grounds"
-#: The ground of every scenario that names none: wet grass, the recording with inflated tyres and
-#: logged motor currents (so the motor model is checked on it too); its yaw ratio, 0.52, is in the
-#: middle of the real runs we know (0.43-0.54).
-DEFAULT_GROUND = "wet_grass"
+#: The default robot's ground of every scenario that names none (its robot.yaml says why)
+DEFAULT_GROUND = load_robot().default_ground
 #: The plant before the calibration (PyBullet's Coulomb friction on the wheels), kept as a ground so
 #: that what changed can be measured against it (`ground: pybullet_coulomb` in a scenario).
 UNCALIBRATED_GROUND = "pybullet_coulomb"
@@ -113,20 +112,22 @@ def with_friction(ground: Ground, friction: float | None) -> Ground:
     return replace(ground, tyre=replace(ground.tyre, friction=friction))
 
 
-def ground_names() -> list[str]:
-    """The shipped grounds' names."""
-    return sorted(path.parent.name for path in GROUNDS_DIR.glob(f"*/{GROUND_FILE}"))
+def ground_names(robot: str = DEFAULT_ROBOT) -> list[str]:
+    """The grounds shipped for `robot` (its folder's grounds/)."""
+    return sorted(path.parent.name for path in load_robot(robot).grounds_dir.glob(f"*/{GROUND_FILE}"))
 
 
-def load_ground(name_or_path: str | Path | None = None) -> Ground:
-    """A shipped ground by name (DEFAULT_GROUND when None), or a ground file by path."""
-    text = DEFAULT_GROUND if name_or_path is None else str(name_or_path)
+def load_ground(name_or_path: str | Path | None = None, robot: str = DEFAULT_ROBOT) -> Ground:
+    """A ground shipped for `robot` by name (its default ground when None), or a ground file by
+    path."""
+    description = load_robot(robot)
+    text = description.default_ground if name_or_path is None else str(name_or_path)
     path = Path(text)
     try:
         if path.suffix not in (".yaml", ".yml"):
-            path = GROUNDS_DIR / text / GROUND_FILE
+            path = description.grounds_dir / text / GROUND_FILE
             if not path.exists():
-                shipped = ", ".join(ground_names())
+                shipped = ", ".join(ground_names(robot))
                 raise GroundError(f"ground: unknown ground {text!r} (shipped: {shipped}, or a .yaml file)")
         resolved = path.resolve()
         stamp = resolved.stat().st_mtime_ns

@@ -10,9 +10,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from controllers.model import wrap_angle
+from husky_sim.paths import DEFAULT_ROBOT
 from husky_sim.sim.drive import DriveConfig, SkidSteerDrive
 from husky_sim.sim.ground import Ground, load_ground
 from husky_sim.sim.robot import HuskyRobot
+from husky_sim.sim.robot_description import load_robot
 from husky_sim.sim.world import World, WorldConfig
 
 #: A command stamped up to this long after a physics step still drives that step (s); absorbs the
@@ -58,34 +60,39 @@ def simulate_commands(
     ground: Ground | None = None,
     payload_kg: float = 0.0,
     wheel_targets: np.ndarray | None = None,
+    robot: str = DEFAULT_ROBOT,
 ) -> SimTrack:
-    """Drive a Husky (with `payload_kg` on its top plate) on `ground` (default: the default
-    ground) from `start` (x m, y m, yaw rad, at rest) for `duration_s` (rounded up to whole
-    physics steps) with the commands held from their times `cmd_t_s` (s). `wheel_targets`, if
-    given, are (left, right) wheel speeds (rad/s) per command, sent in place of the drive's split
-    of the body command (a recording's measured wheel speeds, for the calibration)."""
+    """Drive the robot `robot` (its folder's name; with `payload_kg` on its top plate) on `ground`
+    (default: the robot's default ground) from `start` (x m, y m, yaw rad, at rest) for
+    `duration_s` (rounded up to whole physics steps) with the commands held from their times
+    `cmd_t_s` (s). `wheel_targets`, if given, are (left, right) wheel speeds (rad/s) per command,
+    sent in place of the drive's split of the body command (a recording's measured wheel speeds,
+    for the calibration)."""
+    description = load_robot(robot)
     world = world or WorldConfig()
-    drive = drive or DriveConfig()
-    ground = ground or load_ground()
+    drive = drive or DriveConfig.for_robot(description.specs)
+    ground = ground or load_ground(robot=robot)
     with World(world) as sim:
-        robot = HuskyRobot(sim.client, start, ground.tyre, payload_kg, coulomb=not ground.calibrated)
-        skid = SkidSteerDrive(drive, robot.geometry.wheel_radius_m, robot.geometry.track_width_m, ground)
+        body = HuskyRobot(
+            sim.client, start, ground.tyre, payload_kg, coulomb=not ground.calibrated, robot=description
+        )
+        skid = SkidSteerDrive(drive, body.geometry.wheel_radius_m, body.geometry.track_width_m, ground)
         steps = max(math.ceil(duration_s * world.physics_hz - 1e-6), 0)
         t_s = np.arange(steps + 1) * sim.dt_s
-        poses, velocities, applied = [robot.pose()], [robot.body_velocity()], []
-        wheels, currents = [robot.wheel_speeds()], [(0.0, 0.0)]
+        poses, velocities, applied = [body.pose()], [body.body_velocity()], []
+        wheels, currents = [body.wheel_speeds()], [(0.0, 0.0)]
         held = held_commands(cmd_t_s, commands, t_s[:-1])
         held_wheels = None if wheel_targets is None else held_commands(cmd_t_s, wheel_targets, t_s[:-1])
         for k, command in enumerate(held):
             if held_wheels is None:
-                applied.append(skid.step(robot, command, sim.dt_s))
+                applied.append(skid.step(body, command, sim.dt_s))
             else:
-                applied.append(skid.step_wheels(robot, command, tuple(held_wheels[k]), sim.dt_s))
+                applied.append(skid.step_wheels(body, command, tuple(held_wheels[k]), sim.dt_s))
             sim.step()
-            poses.append(robot.pose())
-            velocities.append(robot.body_velocity())
-            wheels.append(robot.wheel_speeds())
-            currents.append(skid.motor_currents(robot))
+            poses.append(body.pose())
+            velocities.append(body.body_velocity())
+            wheels.append(body.wheel_speeds())
+            currents.append(skid.motor_currents(body))
     return SimTrack(
         t_s,
         np.array(poses),

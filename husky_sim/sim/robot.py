@@ -14,20 +14,22 @@ from dataclasses import dataclass
 import numpy as np
 
 from husky_sim.sim.bullet import pybullet as p
-from husky_sim.sim.geometry import DEFAULT_URDF, RobotGeometry, load_geometry
-from husky_sim.sim.specs import HUSKY_DESCRIPTION
+from husky_sim.sim.geometry import RobotGeometry
+from husky_sim.sim.robot_description import RobotDescription, load_robot
+from husky_sim.sim.specs import PublishedDescription
 from husky_sim.sim.tyre import TyreContact, tyre_force
 
 #: Height (m) of the payload box (payload_inertia): our choice, the manual gives only the mass.
 PAYLOAD_HEIGHT_M = 0.10
 
 
-def payload_inertia(payload_kg: float, com_m: tuple[float, float, float]) -> np.ndarray:
+def payload_inertia(
+    payload_kg: float, com_m: tuple[float, float, float], d: PublishedDescription
+) -> np.ndarray:
     """Diagonal inertia (kg m^2) that a payload adds about the chassis centre of mass `com_m` (m,
     in base_link): a uniform box as long and wide as the chassis ([URDF] base_x_size x base_y_size)
     and PAYLOAD_HEIGHT_M tall, resting on its top (base_z_size), by the parallel-axis theorem.
     Products of inertia are dropped, as for the chassis."""
-    d = HUSKY_DESCRIPTION
     size = np.array([d.base_x_size_m, d.base_y_size_m, PAYLOAD_HEIGHT_M])
     offset = np.array([0.0, 0.0, d.base_z_size_m + 0.5 * PAYLOAD_HEIGHT_M]) - np.asarray(com_m)
     own = payload_kg / 12.0 * (np.sum(size**2) - size**2)  # (b^2 + c^2, a^2 + c^2, a^2 + b^2) m / 12
@@ -70,7 +72,8 @@ class _WheelContact:
 
 
 class HuskyRobot:
-    """A Husky loaded into a PyBullet client (DIRECT), driven through its four wheel joints."""
+    """A robot (its folder: the Husky A200 unless told) loaded into a PyBullet client (DIRECT),
+    driven through its four wheel joints."""
 
     def __init__(
         self,
@@ -79,13 +82,14 @@ class HuskyRobot:
         tyre: TyreContact | None = None,
         payload_kg: float = 0.0,
         coulomb: bool = False,
-        urdf_path=DEFAULT_URDF,
+        robot: RobotDescription | None = None,
     ) -> None:
         self.client = client
-        self.geometry: RobotGeometry = load_geometry(urdf_path)
+        self.description = robot if robot is not None else load_robot()
+        self.geometry: RobotGeometry = self.description.geometry
         x, y, yaw = start
         self.body = p.loadURDF(
-            str(urdf_path),
+            str(self.description.urdf),
             basePosition=[x, y, self.geometry.base_height_m + 1e-3],
             baseOrientation=p.getQuaternionFromEuler([0.0, 0.0, yaw]),
             flags=p.URDF_USE_INERTIA_FROM_FILE,
@@ -130,7 +134,9 @@ class HuskyRobot:
                 self.body,
                 -1,
                 mass=base_mass + payload_kg,
-                localInertiaDiagonal=(base_inertia + payload_inertia(payload_kg, com)).tolist(),
+                localInertiaDiagonal=(
+                    base_inertia + payload_inertia(payload_kg, com, self.description.specs.description)
+                ).tolist(),
                 physicsClientId=client,
             )
         self._inertial_inv = p.invertTransform(*p.getDynamicsInfo(self.body, -1, physicsClientId=client)[3:5])

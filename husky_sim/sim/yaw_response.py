@@ -20,7 +20,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from husky_sim.paths import ASSETS_DIR
+from husky_sim.paths import ASSETS_DIR, DEFAULT_ROBOT
 
 if TYPE_CHECKING:
     from husky_sim.sim.drive import DriveConfig
@@ -214,10 +214,11 @@ def step_signal(
     world: WorldConfig | None = None,
     drive: DriveConfig | None = None,
     delay_s: float = 0.0,
+    robot: str = DEFAULT_ROBOT,
 ) -> Segment:
-    """Simulate the Husky from rest with (linear_mps, yaw_rate_radps) commanded from t = 0 for
-    hold_s (s) on the default ground; the applied yaw rate delayed by delay_s (s, interval means)
-    and the body yaw rate every sample_s (s)."""
+    """Simulate the robot (its folder's name) from rest with (linear_mps, yaw_rate_radps)
+    commanded from t = 0 for hold_s (s) on its default ground; the applied yaw rate delayed by
+    delay_s (s, interval means) and the body yaw rate every sample_s (s)."""
     from husky_sim.sim.open_loop import simulate_commands  # commands in, track out
 
     track = simulate_commands(
@@ -227,6 +228,7 @@ def step_signal(
         (0.0, 0.0, 0.0),
         world=world,
         drive=drive,
+        robot=robot,
     )
     every = max(round(sample_s / float(track.t_s[1] - track.t_s[0])), 1)
     idx = np.arange(0, len(track.t_s), every)
@@ -243,17 +245,18 @@ def identify_in_simulation(
     sample_s: float = 0.1,
     world: WorldConfig | None = None,
     drive: DriveConfig | None = None,
+    robot: str = DEFAULT_ROBOT,
 ) -> Identification:
     """Yaw-rate steps (rad/s) at each linear speed (m/s), each from rest and held hold_s (s), on
-    the default ground with the default (or given) WorldConfig and DriveConfig; one lag fitted to
-    all, behind the ground's dead time. Deterministic (PyBullet DIRECT, no noise)."""
+    the robot's default ground with the default (or given) WorldConfig and DriveConfig; one lag
+    fitted to all, behind the ground's dead time. Deterministic (PyBullet DIRECT, no noise)."""
     from husky_sim.sim.ground import load_ground
 
     if not (0 < sample_s <= hold_s) or not math.isfinite(hold_s):
         raise ValueError(f"identify: need 0 < sample_s <= hold_s, got {sample_s:g} and {hold_s:g}")
-    delay_s = load_ground().drive.command_delay_s
+    delay_s = load_ground(robot=robot).drive.command_delay_s
     commands = [(v, w) for v in linear_speeds_mps for w in yaw_rates_radps]
-    segments = [step_signal(v, w, hold_s, sample_s, world, drive, delay_s) for v, w in commands]
+    segments = [step_signal(v, w, hold_s, sample_s, world, drive, delay_s, robot) for v, w in commands]
     response, total = fit_segments(segments, delay_s)
     steps = []
     for (v, w), segment in zip(commands, segments, strict=True):
@@ -271,9 +274,12 @@ def identify_in_simulation(
     return Identification(response, total, tuple(steps), hold_s, sample_s)
 
 
-def write_identification(identification: Identification, path: Path, command: str) -> None:
-    """Write the identification as YAML to path, with a comment header naming `command` and the UTC
-    time; `gain` and `time_constant_s` are what a scenario's default yaw response reads."""
+def write_identification(
+    identification: Identification, path: Path, command: str, robot_title: str = "Husky A200"
+) -> None:
+    """Write the identification of the robot `robot_title` as YAML to path, with a comment header
+    naming `command` and the UTC time; `gain` and `time_constant_s` are what a scenario's default
+    yaw response reads."""
     from datetime import UTC, datetime
 
     from husky_sim.scenario_file import scenario_yaml
@@ -281,10 +287,11 @@ def write_identification(identification: Identification, path: Path, command: st
     when = datetime.now(UTC).strftime("%Y-%m-%d %H:%M UTC")
     header = (
         f"Produced by `{command}` on {when}.\n"
-        "Husky A200 yaw-rate lag in PyBullet (husky_sim/sim/yaw_response.py): d(omega_body)/dt =\n"
-        "(gain * omega_applied(t - delay_s) - omega_body) / time_constant_s; gain dimensionless,\n"
-        "time_constant_s in s, delay_s the default ground's dead time (s, not fitted), omega_applied\n"
-        "the drive's rate-limited yaw-rate command, omega_body the body yaw rate (rad/s).\n"
+        f"{robot_title} yaw-rate lag in PyBullet (husky_sim/sim/yaw_response.py):\n"
+        "d(omega_body)/dt = (gain * omega_applied(t - delay_s) - omega_body) / time_constant_s;\n"
+        "gain dimensionless, time_constant_s in s, delay_s the robot's default ground's dead time\n"
+        "(s, not fitted), omega_applied the drive's rate-limited yaw-rate command, omega_body the\n"
+        "body yaw rate (rad/s).\n"
         "Fitted to yaw-rate steps from rest at each linear speed; steps: the joint fit's rms error on\n"
         "each step, a lag fitted to that step alone, and the mean measured / commanded yaw rate over\n"
         "the step's second half. The default of every scenario without robot.yaw_response."

@@ -46,9 +46,10 @@ import imageio_ffmpeg
 import numpy as np
 import pybullet_data
 
+from husky_sim.paths import DEFAULT_ROBOT
 from husky_sim.runs.run_folder import read_summary, read_trace, summary_or_empty, write_summary
 from husky_sim.sim.bullet import pybullet as p
-from husky_sim.sim.geometry import DEFAULT_URDF
+from husky_sim.sim.robot_description import load_robot
 from husky_sim.sim.trace import EpisodeTrace
 from husky_sim.viz.video_annotations import (
     GOAL_ARROW_LENGTH_M,
@@ -195,7 +196,8 @@ def _flush_c_stdio() -> None:
 class Scene:
     """The recorded scene in a fresh, headless PyBullet client, posed per frame from the trace."""
 
-    def __init__(self, trace: EpisodeTrace, renderer: str) -> None:
+    def __init__(self, trace: EpisodeTrace, renderer: str, urdf: Path | None = None) -> None:
+        self.urdf = urdf if urdf is not None else load_robot().urdf  # the robot the run drove
         self.trace = trace
         self.client = p.connect(p.DIRECT)
         self._egl_plugin = -1
@@ -234,7 +236,7 @@ class Scene:
         if not os.path.exists(ground):
             ground = os.path.join(pybullet_data.getDataPath(), "plane.urdf")
         p.loadURDF(ground, physicsClientId=cid)
-        self.robot = p.loadURDF(str(DEFAULT_URDF), flags=p.URDF_USE_INERTIA_FROM_FILE, physicsClientId=cid)
+        self.robot = p.loadURDF(str(self.urdf), flags=p.URDF_USE_INERTIA_FROM_FILE, physicsClientId=cid)
         xy = trace.obstacle_xy_m
         moving = moving_obstacle_mask(trace)
         self.obstacles: list[tuple[int, float, bool]] = []
@@ -372,8 +374,10 @@ def render_trace(
     options: RenderOptions | None = None,
     caption: str = "",
     outcome: str = "",
+    urdf: Path | None = None,
 ) -> RenderResult:
-    """Render a trace to an H.264 MP4 at out_file (written whole, then moved into place).
+    """Render a trace to an H.264 MP4 at out_file (written whole, then moved into place); the robot
+    drawn is `urdf`'s (default: the default robot's).
 
     Every frame carries the sim time, the run's outcome (when given) and caption at its top left,
     a legend at its bottom right and, in the top view, a scale bar in m at its bottom left.
@@ -390,7 +394,7 @@ def render_trace(
     font, small_font = frame_font(options.height), frame_font(options.height, lines_per_frame=45)
     legend = legend_image(legend_entries(trace), small_font, int(0.6 * options.width))  # within one view
     start = time.perf_counter()
-    scene = Scene(trace, options.renderer)
+    scene = Scene(trace, options.renderer, urdf)
     try:
         top = top_camera(trace, options) if options.camera in ("top", "both") else None
         headings = (
@@ -500,7 +504,10 @@ def render_run(
     trace = load_run_trace(run_dir)
     out = Path(out_file) if out_file is not None else default_video_file(run_dir, options.camera)
     summary = summary_or_empty(run_dir)  # read once, for the caption and the outcome
-    return render_trace(trace, out, options, caption=run_caption(summary), outcome=run_outcome(summary))
+    urdf = load_robot(str(summary.get("robot", DEFAULT_ROBOT))).urdf
+    return render_trace(
+        trace, out, options, caption=run_caption(summary), outcome=run_outcome(summary), urdf=urdf
+    )
 
 
 def record_in_summary(run_dir: Path, result: RenderResult) -> None:

@@ -190,8 +190,9 @@ def test_calibrate_from_a_ros2_bag_recovers_the_ground_that_drove(tmp_path: Path
 def test_a_scenario_names_its_ground_and_bad_grounds_are_one_line_errors(tmp_path: Path) -> None:
     from husky_sim.runs.scenario import ScenarioError, load_scenario, scenario_from_data
 
-    data = load_scenario("husky_point_stabilisation").model_dump(mode="json")
-    assert data["ground"] == DEFAULT_GROUND
+    scenario = load_scenario("husky_point_stabilisation")
+    data = scenario.model_dump(mode="json")
+    assert data["ground"] is None and scenario.ground_config() == load_ground(DEFAULT_GROUND)  # the robot's
     tile = scenario_from_data({**data, "ground": "tile"}, "test").episode_config()
     assert tile.ground == load_ground("tile") and tile.world.ground_friction == tile.ground.tyre.friction
     bad_tyre = tmp_path / "bad.yaml"

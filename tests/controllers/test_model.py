@@ -58,3 +58,20 @@ def test_rk4_single_step_is_fourth_order() -> None:
 )
 def test_wrap_angle_to_half_open_interval(angle: float, expected: float) -> None:
     assert wrap_angle(angle) == pytest.approx(expected, abs=1e-12)
+
+
+def test_the_extended_model_stays_stable_for_a_robot_whose_yaw_follows_within_a_step() -> None:
+    """A yaw lag ten times shorter than tau (a light robot on unfitted tyres) in one RK4 step
+    diverged, and the structured solver then never returned; in substeps the body yaw rate settles
+    on gain x command. The Husky's lag (0.11 s at tau <= 0.2 s) keeps its single step."""
+    from controllers.husky_cbf.config import RobotResponse
+    from controllers.husky_cbf.model import extended_step, rk4_substeps
+
+    fast = RobotResponse(20.0, 25.0, 1.0, 0.01, 0.19, 2.0)
+    assert rk4_substeps(0.1, fast) == 5
+    assert rk4_substeps(0.2, RobotResponse(3.0, 6.0, 0.85, 0.11, 0.53, 1.0)) == 1
+    step = extended_step(0.1, fast)
+    z = np.array([0.0, 0.0, 0.0, 0.0, 1.0, 0.0])  # commanded 1 rad/s, body at rest
+    for _ in range(10):
+        z = np.asarray(step(z, np.zeros(2))).ravel()
+    assert z[5] == pytest.approx(1.0, abs=1e-6) and np.all(np.isfinite(z))

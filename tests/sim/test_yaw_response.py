@@ -32,6 +32,7 @@ from husky_sim.runs.scenario import (
 from husky_sim.scenario_file import read_scenario_data
 from husky_sim.sim.ground import load_ground
 from husky_sim.sim.open_loop import simulate_commands
+from husky_sim.sim.robot_description import RobotDescription
 from husky_sim.sim.yaw_response import (
     DEFAULT_FILE,
     YawResponse,
@@ -175,7 +176,7 @@ def test_missing_or_malformed_default_is_one_line(
     path = tmp_path / "yaw_response.yaml"
     if content is not None:
         path.write_text(content)
-    monkeypatch.setattr(scenario_module, "YAW_RESPONSE_FILE", path)
+    monkeypatch.setattr(RobotDescription, "yaw_response_file", property(lambda _: path))
     scenario_module.identified_yaw_response.cache_clear()
     try:
         robot = load_scenario("husky_point_stabilisation").robot
