@@ -14,7 +14,7 @@ from controllers import NMPCConfig, NMPCController, SetPoint, SolverOptions
 from controllers.config import SolverBackend
 from husky_sim.runs.paper_problems import CLUTTERED_POINT_STABILISATION
 from husky_sim.sim.drive import DriveConfig
-from husky_sim.sim.environment import HuskyEnvironment
+from husky_sim.sim.environment import PhysicsEnvironment
 from husky_sim.sim.episode import EpisodeConfig, run_episode
 from husky_sim.sim.ground import load_ground, with_friction
 from husky_sim.sim.open_loop import simulate_commands
@@ -159,7 +159,7 @@ def run_sim_bench(
 
     walls = []
     command = np.array([0.5, 0.1])
-    with HuskyEnvironment(config) as env:  # bare: the drive and the physics, no clearance check
+    with PhysicsEnvironment(config) as env:  # bare: the drive and the physics, no clearance check
         world, robot, drive, periods = env.world, env.robot, env.drive, stepping_steps // env.substeps
         stepping_steps = periods * env.substeps  # whole control periods, for the checked loop
         t0 = time.perf_counter()
@@ -167,7 +167,7 @@ def run_sim_bench(
             drive.step(robot, command, world.dt_s)
             world.step()
         walls.append(time.perf_counter() - t0)
-    with HuskyEnvironment(config) as env:  # checked: the episode's own physics loop
+    with PhysicsEnvironment(config) as env:  # checked: the episode's own physics loop
         t0 = time.perf_counter()
         for _ in range(periods):
             env.advance(command)

@@ -46,6 +46,7 @@ def cmd_check(args: argparse.Namespace) -> int:
     sc = load_scenario(args.scenario).with_overrides(solver=args.solver)
     horizon = sc.with_overrides(horizon=args.horizon).controller.horizon  # range-checked here
     seed = sc.seed if args.seed is None else args.seed
+    options.ranges.for_robot(sc.robot.description())  # a payload the robot cannot carry: refused here
     interrupts.begin_run()  # workers are stopped, not orphaned, on a signal
     out = prepare_out_dir(
         Path(args.out or default_check_dir(sc.name, args.controller, horizon, args.samples, seed))
@@ -81,8 +82,9 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
         nargs=2,
         metavar=("LOW", "HIGH"),
         default=None,
-        help="payload range drawn, kg in [0, 75] (default 0 to 20, Clearpath's rating for turning "
-        "in place); check with the payload the robot will carry",
+        help="payload range drawn, kg, at most the robot's maximum payload (default 0 to its "
+        "all-terrain payload: for the Husky, Clearpath's rating for turning in place); check with "
+        "the payload the robot will carry",
     )
     check.add_argument(
         "--out", type=path_arg, default=None, help="output directory (default results/check__...)"

@@ -7,8 +7,6 @@ import argparse
 import math
 import sys
 
-from husky_sim.sim.specs import HUSKY_SPEC_SHEET
-
 
 def controller_choices(paper_only: bool = False, with_baseline: bool = True) -> tuple[str, ...]:
     """The controllers a command may choose: every registered one (controllers.registry), or the
@@ -33,6 +31,9 @@ SOLVER_CHOICES = ("fatrop", "ipopt", "opti")
 RUN_SOLVER_CHOICES = ("fatrop", "ipopt")
 #: The longest horizon N a command takes (husky_sim.runs.scenario.MAX_HORIZON, likewise).
 MAX_HORIZON = 50
+#: The most payload (kg) a command reads (husky_sim.runs.scenario.MAX_PAYLOAD_KG, likewise); the
+#: check then bounds it by the scenario robot's own maximum.
+MAX_PAYLOAD_KG = 1000.0
 
 
 class UsageError(Exception):
@@ -83,8 +84,7 @@ seed_arg = number_in(int, 0, 2**32 - 1)
 jobs_arg = number_in(int, 1, MAX_JOBS)
 count_arg = number_in(int, 1, MAX_SAMPLES)
 unit_float_arg = number_in(float, 0.0, 1.0)
-#: A payload (kg) on the Husky's top plate: at most the spec sheet's maximum.
-payload_arg = number_in(float, 0.0, HUSKY_SPEC_SHEET.max_payload_kg)
+payload_arg = number_in(float, 0.0, MAX_PAYLOAD_KG)
 
 
 #: Where a suite's runs or a check's samples run (husky_sim.runs.parallel.BACKENDS, kept equal by

@@ -197,13 +197,14 @@ def run_check(
     say = log or (lambda _msg: None)
     base = scenario.with_overrides(horizon=options.horizon)  # so saved samples carry it
     seed = base.seed if options.seed is None else options.seed
+    ranges = options.ranges.for_robot(base.robot.description())  # before any work: may refuse
     say(f"audit: timing {options.timing_solves} NMPC solves on the kinematic loop ...")
     solve_times = measure_solve_times(base, options.controller, solves=options.timing_solves)
     findings = audit(base, solve_times, options.thresholds, options.controller)
     for f in findings:
         say(f"  [{f.status}] {f.check}: {f.detail}")
 
-    perturbations = sample_perturbations(options.ranges, options.samples, seed)
+    perturbations = sample_perturbations(ranges, options.samples, seed)
     sample_scenarios = [apply_perturbation(base, p) for p in perturbations]
     tasks = [SampleTask(-1, base.model_dump(mode="json"), options.controller)] + [
         SampleTask(p.index, s.model_dump(mode="json"), options.controller)
@@ -236,7 +237,7 @@ def run_check(
         perturbations=perturbations,
         results=results,
         stats=stats,
-        ranges=options.ranges,
+        ranges=ranges,
         failure_files=failure_files,
     )
     plots = write_plots(report, out_dir)

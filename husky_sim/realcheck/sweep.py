@@ -32,7 +32,7 @@ from __future__ import annotations
 
 import os
 from collections.abc import Callable, Sequence
-from dataclasses import asdict, dataclass, fields
+from dataclasses import asdict, dataclass, fields, replace
 from typing import Any
 
 import numpy as np
@@ -40,6 +40,7 @@ import numpy as np
 from husky_sim.realcheck.steerability import steerability
 from husky_sim.runs.parallel import Backend, parallel_map
 from husky_sim.runs.scenario import Scenario, scenario_from_data
+from husky_sim.sim.robot_description import RobotDescription
 from husky_sim.sim.tyre import stiffness_ratio_for_yaw_ratio
 
 #: Per-sample result keys that are wall-clock measurements (excluded from determinism checks).
@@ -56,10 +57,11 @@ class PerturbationRanges:
     """
 
     ground_friction: tuple[float, float] = (0.4, 1.0)  # ground-plane friction coefficient
-    #: kg on the top plate: Clearpath rates 20 kg for "turning in place in high-friction
-    #: conditions" and 75 kg (the maximum) only for "relatively flat terrain with wide turns"; a
-    #: heavier robot is checked with `--payload-kg LOW HIGH` around what it carries
-    payload_kg: tuple[float, float] = (0.0, 20.0)
+    #: kg on the top plate; None: 0 to the robot's all-terrain payload (specs.yaml; the Husky's
+    #: maker rates it for "turning in place in high-friction conditions", the maximum payload only
+    #: for "relatively flat terrain with wide turns"); a heavier robot is checked with
+    #: `--payload-kg LOW HIGH` around what it carries, at most the robot's maximum payload
+    payload_kg: tuple[float, float] | None = None
     latency_steps: tuple[int, int] = (0, 2)  # control steps, inclusive integer range
     pose_xy_std_m: tuple[float, float] = (0.0, 0.05)  # localisation position noise std, m
     pose_yaw_std_rad: tuple[float, float] = (0.0, 0.03)  # localisation heading noise std, rad
@@ -72,9 +74,23 @@ class PerturbationRanges:
 
     def __post_init__(self) -> None:
         for f in fields(self):
+            if getattr(self, f.name) is None:
+                continue
             low, high = getattr(self, f.name)
             if not (np.isfinite(low) and np.isfinite(high) and 0 <= low <= high):
                 raise ValueError(f"perturbation range {f.name}: need 0 <= low <= high, got ({low}, {high})")
+
+    def for_robot(self, robot: RobotDescription) -> PerturbationRanges:
+        """These ranges with the payload decided for `robot`: 0 to its all-terrain payload unless
+        given; a payload above its maximum is a one-line ValueError."""
+        sheet = robot.specs.spec_sheet
+        low, high = self.payload_kg or (0.0, sheet.all_terrain_payload_kg)
+        if high > sheet.max_payload_kg:
+            raise ValueError(
+                f"--payload-kg: at most {sheet.max_payload_kg:g} kg on a {robot.title} "
+                f"(its maximum payload), got {high:g}"
+            )
+        return replace(self, payload_kg=(low, high))
 
 
 @dataclass(frozen=True)
@@ -113,6 +129,8 @@ def sample_perturbations(ranges: PerturbationRanges, count: int, seed: int) -> l
     """`count` perturbations drawn in a fixed order from default_rng(seed): same inputs, same list."""
     if count < 1:
         raise ValueError(f"samples: must be >= 1, got {count}")
+    if ranges.payload_kg is None:
+        raise ValueError("perturbation ranges: decide the payload for a robot first (for_robot)")
     rng = np.random.default_rng(seed)
     out = []
     for i in range(count):

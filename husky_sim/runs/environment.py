@@ -1,5 +1,5 @@
 """`gymnasium.make("HuskyNav-v0", scenario=...)`: the simulated Husky as a gymnasium environment,
-stepping the same HuskyEnvironment as every run, built from a scenario file resolved by the same
+stepping the same PhysicsEnvironment as every run, built from a scenario file resolved by the same
 schema (husky_sim.runs.scenario). Gymnasium is the `gym` extra."""
 
 from __future__ import annotations
@@ -14,7 +14,7 @@ from controllers import Reference
 from controllers.model import wrap_angle
 from husky_sim.extras import missing
 from husky_sim.runs.scenario import Scenario, load_scenario
-from husky_sim.sim.environment import HuskyEnvironment
+from husky_sim.sim.environment import PhysicsEnvironment
 from husky_sim.sim.episode import EpisodeConfig
 from husky_sim.sim.outcomes import OutcomeMonitor, reference_error
 from husky_sim.sim.rollout import control_steps
@@ -81,7 +81,7 @@ class HuskyNavEnv(gymnasium.Env):
             }
         )
         self._steps = control_steps(config.duration_s, config.tau_s)
-        self._sim: HuskyEnvironment | None = None
+        self._sim: PhysicsEnvironment | None = None
         self._monitor: OutcomeMonitor | None = None
         self._k = 0
         self._resets = 0
@@ -95,7 +95,7 @@ class HuskyNavEnv(gymnasium.Env):
         self._resets += 1
         self.close()
         config = self.config
-        self._sim = HuskyEnvironment(dataclasses.replace(config, seed=int(seed)))
+        self._sim = PhysicsEnvironment(dataclasses.replace(config, seed=int(seed)))
         self._monitor = OutcomeMonitor(self.reference, config.outcomes, config.tau_s)
         self._k = 0
         return self._observe(), {"t_s": 0.0, "clearance_m": math.inf, "outcome": None}

@@ -37,6 +37,7 @@ from controllers import NMPCConfig
 from controllers.settings import Range
 from husky_sim.paths import DEFAULT_ROBOT, SCENARIO_DIR
 from husky_sim.runs.ranged import ranged
+from husky_sim.runs.scenario_errors import ScenarioError, excerpt, one_line
 from husky_sim.runs.settings_schema import settings_fields
 from husky_sim.scenario_file import ScenarioFileError, read_scenario_data
 from husky_sim.sim.drive import DriveConfig
@@ -60,15 +61,12 @@ MAX_OBSTACLES = 64
 MAX_CONTROL_STEPS = 36_000
 #: Largest |x| or |y| of any position (m).
 MAX_COORDINATE_M = 500.0
+#: Most payload (kg) the schema reads at all; the robot's own maximum (specs.yaml) is then checked.
+MAX_PAYLOAD_KG = 1000.0
 #: Scenario names: what a run directory is named after, so no path separators or controls.
 NAME_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9_.+-]{0,79}$"
 #: Most characters of a bad value quoted in an error message.
-EXCERPT_CHARS = 40
 TWO_PI = 2 * math.pi
-
-
-class ScenarioError(ValueError):
-    """A scenario that cannot run; the message is one line naming the field."""
 
 
 def _real(lo: float, hi: float, unit: str = "", *, lo_open: bool = False) -> Any:
@@ -246,7 +244,7 @@ def identified_yaw_response(robot: str = DEFAULT_ROBOT) -> YawResponse:
     try:
         return YawResponseSpec.model_validate_json(json.dumps(wanted, default=str), strict=True).params()
     except ValidationError as exc:
-        raise ScenarioError(_one_line(exc, source)) from None
+        raise ScenarioError(one_line(exc, source)) from None
 
 
 def _robot_name(value: object) -> str:
@@ -265,7 +263,7 @@ class RobotSpec(_Strict):
     radius_margin_m: _real(0.0, 2.0, "m") | None = None
     radius_m: _real(0.0, 5.0, "m", lo_open=True) | None = None
     #: kg on the top plate, up to the robot's published maximum payload (specs.yaml)
-    payload_kg: _real(0.0, 1000.0, "kg") = 0.0
+    payload_kg: _real(0.0, MAX_PAYLOAD_KG, "kg") = 0.0
     yaw_response: YawResponseSpec | None = None  # default: the lag identified in PyBullet
 
     @model_validator(mode="after")
@@ -543,25 +541,6 @@ class Scenario(_Strict):
         return scenario_configs.episode_config(self)
 
 
-def excerpt(value: object, limit: int = EXCERPT_CHARS) -> str:
-    """repr(value), cut to `limit` characters: a 1 MB bad value is not echoed whole."""
-    text = repr(value)
-    return text if len(text) <= limit else f"{text[: limit - 3]}... ({len(text)} characters)"
-
-
-def _one_line(error: ValidationError, source: str) -> str:
-    first = error.errors()[0]
-    loc = ".".join(str(x) for x in first["loc"])
-    msg = first["msg"].removeprefix("Value error, ").replace("\n", " ")
-    got = first.get("input")
-    got_text = "" if isinstance(got, dict | list) or got is None else f" (got {excerpt(got)})"
-    others = [".".join(str(x) for x in e["loc"]) or "scenario" for e in error.errors()[1:]]
-    listed = ", ".join(others[:3]) + (", ..." if len(others) > 3 else "")
-    more = f" [+{len(others)} more: {listed}]" if others else ""
-    where = f"{loc}: " if loc else ""  # a whole-scenario check names its fields in its message
-    return f"{source}: {where}{msg}{got_text}{more}"
-
-
 def scenario_from_data(data: dict[str, Any], source: str = "scenario") -> Scenario:
     """Validate plain data (a parsed file, or `Scenario.model_dump()` with changes) strictly:
     numbers must be numbers, sequences become tuples where the schema says so. One-line
@@ -573,7 +552,7 @@ def scenario_from_data(data: dict[str, Any], source: str = "scenario") -> Scenar
     try:
         return Scenario.model_validate_json(text, strict=True)
     except ValidationError as exc:
-        raise ScenarioError(_one_line(exc, source)) from None
+        raise ScenarioError(one_line(exc, source)) from None
     except (OverflowError, ArithmeticError) as exc:  # a last line of defence: never a traceback
         raise ScenarioError(f"{source}: a value out of any usable range ({exc})") from None
 

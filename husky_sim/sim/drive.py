@@ -27,13 +27,13 @@ from husky_sim.sim import specs as specs
 from husky_sim.sim.ground import DriveResponse, Ground
 
 if TYPE_CHECKING:
-    from husky_sim.sim.robot import HuskyRobot
+    from husky_sim.sim.robot import SkidSteerRobot
 
 
 @dataclass(frozen=True)
 class MotorConfig:
     """One side's gearmotor and its controller (husky_sim.sim.specs, [MOTOR]); it drives the side's
-    two wheels through one belt, at one speed (husky_sim.sim.robot.HuskyRobot.drive_wheels)."""
+    two wheels through one belt, at one speed (husky_sim.sim.robot.SkidSteerRobot.drive_wheels)."""
 
     torque_constant_nm_per_a: float = specs.MOTOR_TORQUE_CONSTANT_NM_PER_A  # N m / A
     gear_ratio: float = specs.MOTOR_GEAR_RATIO  # motor turns per wheel turn
@@ -194,7 +194,7 @@ class SkidSteerDrive:
             self._targets = (left + a * (delayed[0] - left), right + a * (delayed[1] - right))
         return self._targets
 
-    def step(self, robot: HuskyRobot, command: np.ndarray, dt_s: float) -> np.ndarray:
+    def step(self, robot: SkidSteerRobot, command: np.ndarray, dt_s: float) -> np.ndarray:
         """One physics step's drive: limit `command` [v m/s, omega rad/s], send the delayed and
         lagged wheel targets to the motors with the current-limited torque, and apply the tyre
         forces. Call it before the world's step; returns the limited command."""
@@ -202,7 +202,7 @@ class SkidSteerDrive:
         return self.step_wheels(robot, applied, self.wheel_speeds(applied), dt_s)
 
     def step_wheels(
-        self, robot: HuskyRobot, applied: np.ndarray, wheel_speeds: tuple[float, float], dt_s: float
+        self, robot: SkidSteerRobot, applied: np.ndarray, wheel_speeds: tuple[float, float], dt_s: float
     ) -> np.ndarray:
         """`step` from given (left, right) wheel speeds (rad/s) in place of the split of the
         limited command `applied` (returned as is): a recording's wheel speeds, for calibration."""
@@ -210,7 +210,7 @@ class SkidSteerDrive:
         robot.drive_wheels(left, right, self.side_torque_limit_nm)
         return applied
 
-    def motor_currents(self, robot: HuskyRobot) -> tuple[float, float]:
+    def motor_currents(self, robot: SkidSteerRobot) -> tuple[float, float]:
         """Left and right motor currents (A) from the wheel torques of the last physics step."""
         (left, right), speeds = robot.side_torques(), robot.wheel_speeds()
         half = len(speeds) // 2

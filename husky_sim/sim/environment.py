@@ -1,7 +1,7 @@
 """The simulated Husky as an environment: one PyBullet world with the robot, its skid-steer drive,
 the sensor and the clearance monitor, advanced one control period at a time.
 
-`HuskyEnvironment` is the physics side of a control step. The closed loop (husky_sim.sim.rollout,
+`PhysicsEnvironment` is the physics side of a control step. The closed loop (husky_sim.sim.rollout,
 through husky_sim.sim.episode.run_episode) steps it with the NMPC's commands, and the gymnasium
 environment `HuskyNavEnv` (husky_sim.runs.environment, "HuskyNav-v0") steps the same class
 with an agent's actions, so both simulate the same thing: the command is held for tau through the
@@ -19,7 +19,7 @@ import numpy as np
 
 from husky_sim.sim.collision import ClearanceMonitor
 from husky_sim.sim.drive import SkidSteerDrive
-from husky_sim.sim.robot import HuskyRobot
+from husky_sim.sim.robot import SkidSteerRobot
 from husky_sim.sim.robot_description import load_robot
 from husky_sim.sim.sensing import Measurement, Sensor
 from husky_sim.sim.world import World
@@ -32,8 +32,8 @@ if TYPE_CHECKING:
 CLEARANCE_PREFILTER_MARGIN_M = 0.02
 
 
-class HuskyEnvironment:
-    """One episode's simulated Husky (EpisodeConfig: world, start, drive, ground, payload,
+class PhysicsEnvironment:
+    """One episode's simulated robot (EpisodeConfig: robot, world, start, drive, ground, payload,
     sensing and its seed), a husky_sim.sim.rollout.Plant. Call `close` (or use it as a context
     manager) to free the world."""
 
@@ -42,7 +42,7 @@ class HuskyEnvironment:
         self.world = World(config.world)
         try:
             ground = config.ground
-            self.robot = HuskyRobot(
+            self.robot = SkidSteerRobot(
                 self.world.client,
                 config.start,
                 ground.tyre,
@@ -116,7 +116,7 @@ class HuskyEnvironment:
     def close(self) -> None:
         self.world.close()
 
-    def __enter__(self) -> HuskyEnvironment:
+    def __enter__(self) -> PhysicsEnvironment:
         return self
 
     def __exit__(self, *exc: object) -> None:

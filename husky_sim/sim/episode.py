@@ -2,7 +2,7 @@
 
 Physics runs at `physics_hz`; every tau seconds the loop (husky_sim.sim.rollout, the one closed
 loop) senses, calls the controller and holds its command through the drive's limits until the next
-control step. The physics side of a control step is husky_sim.sim.environment.HuskyEnvironment, the
+control step. The physics side of a control step is husky_sim.sim.environment.PhysicsEnvironment, the
 one the gymnasium environment HuskyNav-v0 steps, and the outcome is named by
 husky_sim.sim.outcomes.OutcomeMonitor, as there. Collision is checked by the physics engine every
 physics step (husky_sim.sim.collision). Each control step writes one log row, flushed at once
@@ -25,11 +25,11 @@ from controllers import Controller, Reference, SetPoint
 from husky_sim import interrupts
 from husky_sim.paths import DEFAULT_ROBOT
 from husky_sim.sim.drive import DriveConfig
-from husky_sim.sim.environment import HuskyEnvironment
+from husky_sim.sim.environment import PhysicsEnvironment
 from husky_sim.sim.ground import Ground, load_ground
 from husky_sim.sim.metrics import EpisodeMetrics, summarise
 from husky_sim.sim.outcomes import OutcomeMonitor, Outcomes
-from husky_sim.sim.robot import HuskyRobot
+from husky_sim.sim.robot import SkidSteerRobot
 from husky_sim.sim.rollout import StepObserver, control_steps, rollout
 from husky_sim.sim.sensing import SensingConfig
 from husky_sim.sim.step_log import StepLog
@@ -94,7 +94,7 @@ def run_episode(
             f"sampling time ({controller_tau} s)"
         )
     interrupts.check()
-    env = HuskyEnvironment(config)
+    env = PhysicsEnvironment(config)
     log = StepLog(log_path)
     try:
         return _run(env, log, controller, reference, config, robot_radius_m, wall_start, observer)
@@ -104,7 +104,7 @@ def run_episode(
 
 
 def _run(
-    env: HuskyEnvironment,
+    env: PhysicsEnvironment,
     log: StepLog,
     controller: Controller,
     reference: Reference,
@@ -152,7 +152,7 @@ def _run(
 class _TraceRecorder:
     """Samples the true base pose and obstacle centres every `every` physics steps (reads only)."""
 
-    def __init__(self, robot: HuskyRobot, world: World, every: int) -> None:
+    def __init__(self, robot: SkidSteerRobot, world: World, every: int) -> None:
         self._robot, self._world, self._every = robot, world, every
         self._count = 0
         self._t: list[float] = []

@@ -13,7 +13,7 @@ from controllers.model import wrap_angle
 from husky_sim.paths import DEFAULT_ROBOT
 from husky_sim.sim.drive import DriveConfig, SkidSteerDrive
 from husky_sim.sim.ground import Ground, load_ground
-from husky_sim.sim.robot import HuskyRobot
+from husky_sim.sim.robot import SkidSteerRobot
 from husky_sim.sim.robot_description import load_robot
 from husky_sim.sim.world import World, WorldConfig
 
@@ -73,7 +73,7 @@ def simulate_commands(
     drive = drive or DriveConfig.for_robot(description.specs)
     ground = ground or load_ground(robot=robot)
     with World(world) as sim:
-        body = HuskyRobot(
+        body = SkidSteerRobot(
             sim.client, start, ground.tyre, payload_kg, coulomb=not ground.calibrated, robot=description
         )
         skid = SkidSteerDrive(drive, body.geometry.wheel_radius_m, body.geometry.track_width_m, ground)

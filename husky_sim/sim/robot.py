@@ -71,7 +71,7 @@ class _WheelContact:
     v_lat: float
 
 
-class HuskyRobot:
+class SkidSteerRobot:
     """A robot (its folder: the Husky A200 unless told) loaded into a PyBullet client (DIRECT),
     driven through its four wheel joints."""
 

@@ -6,6 +6,7 @@ for `assets/husky_a200/husky_a200.urdf` are derived here (:data:`HUSKY_MODEL`).
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import Any
@@ -130,9 +131,11 @@ def _section(kind: type, data: Any, where: str) -> Any:
     return kind(**{k: tuple(v) if isinstance(v, list) else v for k, v in data.items()})
 
 
+@functools.cache
 def load_specs(path: Path = SPECS_FILE) -> RobotSpecs:
-    """A robot's published figures from its specs file; a missing or extra field is a one-line
-    ValueError naming the file and the section."""
+    """A robot's published figures from its specs file, read once per file (the simulator's
+    constants here and the robot description share one copy); a missing or extra field is a
+    one-line ValueError naming the file and the section."""
     try:
         data = read_scenario_data(path)
     except ScenarioFileError as exc:

@@ -66,7 +66,10 @@ def test_a_sweep_builds_husky_cbf_once_per_problem(scenario: str) -> None:
 
     forget_shared_solvers()
     base = load_scenario(scenario)
-    samples = [apply_perturbation(base, p) for p in sample_perturbations(CheckOptions().ranges, 2, 0)]
+    samples = [
+        apply_perturbation(base, p)
+        for p in sample_perturbations(CheckOptions().ranges.for_robot(base.robot.description()), 2, 0)
+    ]
     first, second = (s.make_controller("husky-cbf") for s in samples)
     assert samples[0].controller_config("husky-cbf") != samples[1].controller_config("husky-cbf")
     assert first._hard is second._hard and first._soft is second._soft

@@ -35,6 +35,7 @@ from husky_sim.runs.run import run_scenario
 from husky_sim.runs.scenario import Scenario, load_scenario
 from husky_sim.sim.geometry import load_geometry
 from husky_sim.sim.ground import load_ground
+from husky_sim.sim.robot_description import load_robot
 from husky_sim.sim.sensing import SensingConfig, Sensor
 from husky_sim.sim.tyre import stiffness_ratio_for_yaw_ratio
 
@@ -54,6 +55,11 @@ def _modified(scenario: Scenario, **changes: Any) -> Scenario:
 
 def _without_wall_clock(results: list[dict[str, Any]]) -> list[dict[str, Any]]:
     return [{k: v for k, v in r.items() if k not in WALL_CLOCK_KEYS} for r in results]
+
+
+#: The check's default ranges with the payload decided for the Husky (0 to its 20 kg all-terrain
+#: payload).
+HUSKY_RANGES = PerturbationRanges().for_robot(load_robot())
 
 
 def _short_moving_scenario(duration_s: float = 2.5) -> Scenario:
@@ -95,7 +101,7 @@ def test_audit_fails_the_papers_radius_and_passes_a_sane_one() -> None:
         "min_clearance_m": 0.4,
         "steerability": {"turn_in_place_radps": 1.0, "current_headroom_a": 15.0},  # an unloaded robot
     }
-    stats, samples = sweep_stats([one_pass]), sample_perturbations(PerturbationRanges(), 1, 0)
+    stats, samples = sweep_stats([one_pass]), sample_perturbations(HUSKY_RANGES, 1, 0)
     decision, reason = verdict(findings, nominal, stats, samples, 0.9)
     assert decision == "FAIL" and "robot radius" in reason
     assert verdict(audit(sane, fast), nominal, stats, samples, 0.9)[0] == "PASS"
@@ -179,7 +185,7 @@ def test_timing_fails_when_tau_is_shorter_than_the_measured_solves() -> None:
 
 # -- sampling and perturbations ----------------------------------------------------------------
 def test_sampling_is_deterministic_and_within_the_ranges() -> None:
-    ranges = PerturbationRanges()
+    ranges = HUSKY_RANGES
     a, b = sample_perturbations(ranges, 20, 42), sample_perturbations(ranges, 20, 42)
     assert a == b
     assert sample_perturbations(ranges, 5, 42) == a[:5]  # K is a prefix: more samples extend the list
@@ -187,16 +193,31 @@ def test_sampling_is_deterministic_and_within_the_ranges() -> None:
     assert len({p.episode_seed for p in a}) == 20
     for p in a:
         assert ranges.ground_friction[0] <= p.ground_friction <= ranges.ground_friction[1]
-        assert 0.0 <= p.payload_kg <= 75.0
+        assert 0.0 <= p.payload_kg <= load_robot().specs.spec_sheet.all_terrain_payload_kg
         assert 0.7 <= p.torque_scale <= 1.0 and 0.8 <= p.obstacle_velocity_scale <= 1.2
     assert {p.latency_steps for p in a} == {0, 1, 2}
     with pytest.raises(ValueError, match="samples"):
         sample_perturbations(ranges, 0, 42)
+    with pytest.raises(ValueError, match="payload"):  # the payload is a robot's, decided first
+        sample_perturbations(PerturbationRanges(), 1, 42)
+
+
+@pytest.mark.parametrize("robot", ["husky_a200", "jackal_j100"])
+def test_the_payload_range_is_the_robots(robot: str) -> None:
+    """0 to the robot's all-terrain payload by default; a declared range above its maximum payload
+    is refused in one line naming the flag and the robot's figure."""
+    description = load_robot(robot)
+    sheet = description.specs.spec_sheet
+    assert PerturbationRanges().for_robot(description).payload_kg == (0.0, sheet.all_terrain_payload_kg)
+    declared = PerturbationRanges(payload_kg=(0.0, sheet.max_payload_kg))
+    assert declared.for_robot(description).payload_kg == (0.0, sheet.max_payload_kg)
+    with pytest.raises(ValueError, match=rf"--payload-kg: at most {sheet.max_payload_kg:g} kg on a"):
+        PerturbationRanges(payload_kg=(0.0, sheet.max_payload_kg + 1.0)).for_robot(description)
 
 
 def test_a_perturbation_changes_only_its_fields() -> None:
     base = _short_moving_scenario()
-    p = sample_perturbations(PerturbationRanges(), 1, 3)[0]
+    p = sample_perturbations(HUSKY_RANGES, 1, 3)[0]
     sc = apply_perturbation(base, p)
     assert sc.seed == p.episode_seed
     assert sc.friction.ground == p.ground_friction and sc.robot.payload_kg == p.payload_kg
@@ -229,7 +250,7 @@ def test_sensor_scales_the_reported_obstacle_velocity() -> None:
 def test_sweep_gives_identical_results_on_local_processes_and_dask() -> None:
     pytest.importorskip("distributed")
     base = _short_moving_scenario()
-    perturbations = sample_perturbations(PerturbationRanges(), 3, 11)
+    perturbations = sample_perturbations(HUSKY_RANGES, 3, 11)
     tasks = [
         SampleTask(p.index, apply_perturbation(base, p).model_dump(mode="json"), "relax-cbf")
         for p in perturbations
@@ -287,7 +308,7 @@ def test_check_cli_writes_reports_and_a_failing_sample_reproduces(
 def test_run_sample_matches_run_scenario_in_process() -> None:
     # the worker's result is what run_scenario gives for the perturbed scenario (no hidden state)
     base = _short_moving_scenario(1.5)
-    p = sample_perturbations(PerturbationRanges(), 1, 8)[0]
+    p = sample_perturbations(HUSKY_RANGES, 1, 8)[0]
     sc = apply_perturbation(base, p)
     [result] = run_tasks([SampleTask(0, sc.model_dump(mode="json"), "bt")], "local", jobs=1)
     direct = run_scenario(sc, "bt").metrics

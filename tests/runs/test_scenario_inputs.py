@@ -342,11 +342,12 @@ def test_cli_choices_are_the_controllers_packages() -> None:
     """The CLI names them without importing CasADi before its signal handlers; they must not drift."""
     from controllers.config import SOLVER_BACKENDS
     from husky_sim.cli import SOLVER_CHOICES
-    from husky_sim.cli.common import MAX_HORIZON, PARALLEL_BACKENDS, RUN_SOLVER_CHOICES
+    from husky_sim.cli.common import MAX_HORIZON, MAX_PAYLOAD_KG, PARALLEL_BACKENDS, RUN_SOLVER_CHOICES
     from husky_sim.runs import parallel, scenario
 
     assert SOLVER_CHOICES == SOLVER_BACKENDS
     literal, _ = get_args(scenario.ControllerSpec.model_fields["solver"].annotation)  # Literal | None
     assert set(RUN_SOLVER_CHOICES) == set(get_args(literal))
     assert MAX_HORIZON == scenario.MAX_HORIZON
+    assert MAX_PAYLOAD_KG == scenario.MAX_PAYLOAD_KG
     assert PARALLEL_BACKENDS == parallel.BACKENDS

@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 
 from husky_sim.sim.bullet import pybullet as p
-from husky_sim.sim.environment import HuskyEnvironment
+from husky_sim.sim.environment import PhysicsEnvironment
 from husky_sim.sim.episode import EpisodeConfig
-from husky_sim.sim.robot import HuskyRobot
+from husky_sim.sim.robot import SkidSteerRobot
 from husky_sim.sim.world import ObstacleSpec, WorldConfig
 
 pytestmark = pytest.mark.physics
@@ -25,18 +25,18 @@ OBSTACLES = (
 )
 
 
-def engine_minimum(robot: HuskyRobot, bodies: list[int], client: int) -> float:
+def engine_minimum(robot: SkidSteerRobot, bodies: list[int], client: int) -> float:
     """The smallest signed distance of the robot to any body, every body asked in full."""
     points = [p.getClosestPoints(robot.body, b, distance=10.0, physicsClientId=client) for b in bodies]
     return min((pt[8] for body_points in points for pt in body_points), default=math.inf)
 
 
 def test_the_episodes_clearance_is_the_engines_minimum_over_each_period() -> None:
-    """The clearance HuskyEnvironment.advance reports for a control period (ClearanceMonitor.smallest,
+    """The clearance PhysicsEnvironment.advance reports for a control period (ClearanceMonitor.smallest,
     a running minimum) against every body asked in full after each of its physics steps."""
     world_config = WorldConfig(obstacles=OBSTACLES, arena_half_size_m=2.2)
     config = EpisodeConfig(start=(0.0, 0.0, 0.3), tau_s=0.1, world=world_config)
-    with HuskyEnvironment(config) as env:
+    with PhysicsEnvironment(config) as env:
         bodies = env.world.obstacle_ids + env.world.wall_ids
         in_period: list[float] = []  # the engine's minimum after each physics step of a period
 

@@ -9,7 +9,7 @@ import pytest
 from husky_sim.bench.closed_loop import drive_open_loop
 from husky_sim.sim.drive import DriveConfig, SkidSteerDrive
 from husky_sim.sim.ground import load_ground
-from husky_sim.sim.robot import HuskyRobot
+from husky_sim.sim.robot import SkidSteerRobot
 from husky_sim.sim.world import World, WorldConfig
 
 pytestmark = pytest.mark.physics  # PyBullet or closed loops throughout (`make test-fast` skips)
@@ -64,7 +64,7 @@ def test_velocity_limits_clip_commands() -> None:
 
 def test_pose_is_base_link() -> None:
     with World(WorldConfig()) as world:
-        robot = HuskyRobot(world.client, (1.0, -2.0, math.pi / 3))
+        robot = SkidSteerRobot(world.client, (1.0, -2.0, math.pi / 3))
         pose = robot.pose()
     assert pose == pytest.approx([1.0, -2.0, math.pi / 3], abs=1e-6)
 
@@ -93,11 +93,11 @@ def test_a_payload_adds_its_own_inertia_to_the_chassis() -> None:
     from husky_sim.sim.specs import HUSKY_DESCRIPTION as d
 
     with World(WorldConfig()) as world:
-        empty = HuskyRobot(world.client, (0.0, 0.0, 0.0))
+        empty = SkidSteerRobot(world.client, (0.0, 0.0, 0.0))
         inertia = lambda robot: np.array(p.getDynamicsInfo(robot.body, -1, physicsClientId=world.client)[2])  # noqa: E731
         mass = lambda robot: p.getDynamicsInfo(robot.body, -1, physicsClientId=world.client)[0]  # noqa: E731
-        gram = HuskyRobot(world.client, (3.0, 0.0, 0.0), payload_kg=0.001)
-        loaded = HuskyRobot(world.client, (6.0, 0.0, 0.0), payload_kg=75.0)
+        gram = SkidSteerRobot(world.client, (3.0, 0.0, 0.0), payload_kg=0.001)
+        loaded = SkidSteerRobot(world.client, (6.0, 0.0, 0.0), payload_kg=75.0)
         assert inertia(gram) == pytest.approx(inertia(empty), abs=2e-4)
         assert mass(loaded) == pytest.approx(mass(empty) + 75.0)
         added = inertia(loaded) - inertia(empty)

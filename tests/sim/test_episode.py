@@ -11,7 +11,7 @@ import pytest
 from controllers import NMPCConfig, NMPCController, Obstacle, SetPoint
 from husky_sim.sim.collision import ClearanceMonitor
 from husky_sim.sim.episode import EpisodeConfig, run_episode
-from husky_sim.sim.robot import HuskyRobot
+from husky_sim.sim.robot import SkidSteerRobot
 from husky_sim.sim.sensing import SensingConfig
 from husky_sim.sim.step_log import compare_logs
 from husky_sim.sim.world import ObstacleSpec, World, WorldConfig
@@ -39,7 +39,7 @@ def controller(safety: str) -> NMPCController:
 def test_clearance_monitor_measures_the_body() -> None:
     """Obstacle 2 m ahead: the nearest body point is the chassis front at x = 0.4937 m."""
     with World(WorldConfig(obstacles=(ObstacleSpec(2.0, 0.0, 0.3),))) as world:
-        robot = HuskyRobot(world.client, (0.0, 0.0, 0.0))
+        robot = SkidSteerRobot(world.client, (0.0, 0.0, 0.0))
         exact = ClearanceMonitor(
             world.client, robot.body, world.obstacle_ids, [0.3], 0.59, exact_within_m=5.0
         )
