@@ -379,6 +379,7 @@ class SuccessSpec(_Strict):
     tracking_rmse_m: _real(0.0, 10.0, "m", lo_open=True) = Outcomes.tracking_rmse_m
     tracking_settle_s: _real(0.0, 3600.0, "s") = Outcomes.tracking_settle_s
     rejoin_s: _real(0.0, 3600.0, "s") = Outcomes.rejoin_s
+    leave_s: _real(0.0, 3600.0, "s") = Outcomes.leave_s
     stuck_window_steps: _whole(1, 1000, "steps") = Outcomes.stuck_window_steps
     stuck_speed_mps: _real(0.0, 1.0, "m/s", lo_open=True) = Outcomes.stuck_speed_mps
     stuck_yaw_rate_radps: _real(0.0, 2.0, "rad/s", lo_open=True) = Outcomes.stuck_yaw_rate_radps

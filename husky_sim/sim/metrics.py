@@ -96,20 +96,22 @@ def judge_tracking(
     position errors (m) and whether the reference point was reachable (`reference_reachable`).
 
     An instant is *blocked* while the reference point is unreachable: no safe robot can be there,
-    so its error is not judged. When the reference becomes reachable again a *rejoin window* opens;
-    it closes at the first instant whose error is below `tracking_rmse_m`, and its length is that
-    instant's time minus the window's start (the clock starts no earlier than `tracking_settle_s`:
-    nothing before settling is judged). Instants in a window are judged by the rejoin rule, not the
-    RMSE. A window cut short (by the end of the run or by a new blockage) is not judged unless it
-    already lasted longer than `rejoin_s`: then it is a failed rejoin, with its length so far.
-    The run converged when its outcome is `tracking`, the RMSE over the remaining instants from
-    `tracking_settle_s` on is <= `tracking_rmse_m` (there must be at least one), and every
-    measured rejoin took <= `rejoin_s`. With the reference always reachable this is the plain RMSE
-    rule (`tracking_rmse`).
+    so its error is not judged; nor is it in the `leave_s` before a blockage, when a robot must
+    already be stepping out of the way. When the reference becomes reachable again a *rejoin
+    window* opens; it closes at the first instant whose error is below `tracking_rmse_m`, and its
+    length is that instant's time minus the window's start (the clock starts no earlier than
+    `tracking_settle_s`: nothing before settling is judged). Instants in a window are judged by
+    the rejoin rule, not the RMSE. A window cut short (by the end of the run or by a new blockage)
+    is not judged unless it already lasted longer than `rejoin_s`: then it is a failed rejoin,
+    with its length so far. The run converged when its outcome is `tracking`, the RMSE over the
+    remaining instants from `tracking_settle_s` on is <= `tracking_rmse_m` (there must be at least
+    one), and every measured rejoin took <= `rejoin_s`. With the reference always reachable this
+    is the plain RMSE rule (`tracking_rmse`).
     """
     t = np.asarray(t_s, dtype=float)
     err = np.asarray(errors_m, dtype=float)
-    reachable = np.asarray(ref_reachable, dtype=bool)
+    reference_reachable = np.asarray(ref_reachable, dtype=bool)
+    reachable = _clear_ahead(reference_reachable, round(outcomes.leave_s / tau_s))
     settle, bound, rejoin_s = outcomes.tracking_settle_s, outcomes.tracking_rmse_m, outcomes.rejoin_s
     judged = reachable.copy()
     rejoins: list[float] = []
@@ -135,7 +137,17 @@ def judge_tracking(
     converged = (
         outcome == "tracking" and rmse is not None and rmse <= bound and all(r <= rejoin_s for r in rejoins)
     )
-    return TrackingJudgement(rmse, float(np.sum(~reachable)) * tau_s, tuple(rejoins), bool(converged))
+    blocked_s = float(np.sum(~reference_reachable)) * tau_s
+    return TrackingJudgement(rmse, blocked_s, tuple(rejoins), bool(converged))
+
+
+def _clear_ahead(reachable: np.ndarray, steps: int) -> np.ndarray:
+    """Whether the reference stays reachable from each instant through the next `steps` ones."""
+    blocked = ~reachable
+    ahead = blocked.copy()
+    for k in range(1, steps + 1):
+        ahead[:-k] |= blocked[k:]
+    return ~ahead
 
 
 @dataclass(frozen=True)

@@ -31,6 +31,12 @@ class Outcomes:
     # limit it gains >= 0.6 m/s on the shipped references (0.23 to 0.4 m/s): 3 m in 5 s. A robot
     # that needs longer once the way is clear is waiting or lagging, not tracking.
     rejoin_s: float = 5.0
+    # the instants this long (s) before the reference becomes unreachable are not judged either: a
+    # robot standing on it must be gone when the obstacle arrives. 2 s: to take its circle out of
+    # a mover's way (the robot's plus the mover's radius, 1.1 to 1.3 m on the shipped scenarios)
+    # the Husky drives that far sideways, which at its 1 m/s and 1 m/s^2 (ROS 2 limits) alone takes
+    # 1.6 to 1.8 s, before any turn towards the side; a robot that leaves earlier is judged.
+    leave_s: float = 2.0
     stuck_window_steps: int = 10  # mean |v| over this many control steps ...
     stuck_speed_mps: float = 0.05  # ... below this, away from the reference -> stuck
     # ... and mean |yaw rate| below this: a skid-steer robot turning in place is not stuck

@@ -77,9 +77,26 @@ def test_window_cut_by_a_new_blockage_is_judged_only_when_overdue() -> None:
     err[_between(t, 20.0, 33.0)] = 1.0  # 3 s open between two blockages: not judged
     assert judge_tracking("tracking", t, err, reachable, TAU_S, OUTCOMES).converged
     reachable[_between(t, 28.0, 33.0)] = True
-    reachable[_between(t, 32.0, 35.0)] = False  # 7 s open before the next blockage: failed
-    err[_between(t, 20.0, 35.0)] = 1.0
+    reachable[_between(t, 34.0, 37.0)] = False  # 9 s open, 7 s of it before the leave window: failed
+    err[_between(t, 20.0, 37.0)] = 1.0
     assert not judge_tracking("tracking", t, err, reachable, TAU_S, OUTCOMES).converged
+
+
+@pytest.mark.parametrize(("left_s", "converged"), [(1.5, True), (2.0, True), (5.0, False)])
+def test_leaving_before_a_blockage_is_judged_only_beyond_leave_s(left_s: float, converged: bool) -> None:
+    """A robot standing on the reference must be gone when an obstacle arrives: the `leave_s`
+    (2 s) before a blockage are not judged; a robot that left earlier than that is."""
+    t, err, reachable = _series()
+    reachable[_between(t, 30.0, 35.0)] = False
+    err[_between(t, 30.0 - left_s, 35.0)] = 2.0  # aside from left_s before the blockage to its end
+    judged = judge_tracking("tracking", t, err, reachable, TAU_S, OUTCOMES)
+    assert OUTCOMES.leave_s == 2.0
+    assert judged.blocked_s == pytest.approx(5.0)  # the blockage itself, not the leave window
+    assert judged.converged == converged
+    if converged:
+        assert judged.rmse_reachable_m == pytest.approx(0.1)
+    no_leave = judge_tracking("tracking", t, err, reachable, TAU_S, Outcomes(leave_s=0.0))
+    assert no_leave.rmse_reachable_m > judged.rmse_reachable_m  # those instants were excluded
 
 
 def test_rejoin_clock_starts_at_settle_and_other_outcomes_never_converge() -> None:
