@@ -48,6 +48,7 @@ class RobotFacts:
     footprint_half_extents_m: tuple[float, float]  # body rectangle about the base origin (m)
     pose_xy_std_m: float = 0.0  # localisation's position noise per axis (m)
     pose_yaw_std_rad: float = 0.0  # localisation's heading noise (rad)
+    sensing_latency_s: float = 0.0  # how old the reported pose and obstacles are when they arrive (s)
 
 
 @dataclass(frozen=True)
@@ -79,13 +80,14 @@ class PlanProfile:
     plans with (N, tau, gamma, v bounds, robot circle, solver), the largest yaw rate it commands
     (rad/s), and, where its model has them, the body discs, the accelerations it plans within
     (m/s^2, rad/s^2) and the drive dead time it plans for (s); None: the paper's unicycle (one
-    circle, instant velocity changes, instant stop)."""
+    circle, instant velocity changes, instant stop). And the sensing latency it was told of (s)."""
 
     nmpc: NMPCConfig
     omega_cmd_max_radps: float
     body: BodyDiscs | None = None
     planned_accel: tuple[float, float] | None = None
     planned_dead_time_s: float | None = None
+    planned_latency_s: float = 0.0  # the sensing latency its plans start from (s)
 
 
 @dataclass(frozen=True)

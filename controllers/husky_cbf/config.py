@@ -253,6 +253,10 @@ class HuskyCBFConfig:
     #: the localisation's reported pose noise: the set-point approach decides on a filtered pose
     #: (localisation.PoseFilter); none declared, the measured pose as it is
     pose_noise: PoseNoise = field(default_factory=PoseNoise)
+    #: how old the measured pose and obstacles are when they arrive (s): each plan starts from the
+    #: pose predicted over this plus the drive's dead time under the commands already sent, and
+    #: the obstacles predicted as far (delay.CommandPipe); a robot fact, not a tuning setting
+    sensing_latency_s: float = 0.0
     #: turn monitor (turn_monitor.py): over the last weak_turn_window_s (s), once the model
     #: predicted at least weak_turn_min_rad of heading change, a robot on its way to a set-point
     #: that turned less than weak_turn_ratio of it is held to weak_turn_speed_mps (m/s): it may
@@ -276,6 +280,12 @@ class HuskyCBFConfig:
         return self.nmpc.tau_s
 
     @property
+    def measurement_delay_s(self) -> float:
+        """From the instant a measurement was taken to the one its plan's first command acts (s):
+        the sensing latency plus the drive's dead time."""
+        return self.sensing_latency_s + self.response.command_delay_s
+
+    @property
     def horizon(self) -> int:
         """Prediction steps N, the paper part's."""
         return self.nmpc.horizon
@@ -284,6 +294,7 @@ class HuskyCBFConfig:
         if self.nmpc.safety != "relax-cbf":
             raise ConfigError(f"nmpc.safety: husky-cbf is built on relax-cbf, got {self.nmpc.safety!r}")
         _positive("omega_cmd_max_radps", self.omega_cmd_max_radps)
+        _non_negative("sensing_latency_s", self.sensing_latency_s)
         if len(self.accel_weight) != 2 or len(self.terminal_weight) != 3:
             raise ConfigError("accel_weight, terminal_weight: two and three weights")
         check_ranges(self, "")

@@ -3,8 +3,9 @@
 Per control step:
 1. the initial state of the extended model, at the instant the drive will act on this step's
    command (delay.py: after the drive's dead time): the pose and body yaw rate predicted over the
-   dead time from the measured pose and the estimated yaw rate (the model's prediction corrected
-   by the measured heading change) under the commands already sent, and the last command;
+   sensing latency and the dead time from the measured pose and the estimated yaw rate (the
+   model's prediction corrected by the measured heading change) under the commands already sent,
+   and the last command;
 2. the reference: the paper's, unless guidance (guidance.py) gives a waypoint: out of the way of a
    mover on a collision course, out of a deadlock (escape.py: the robot made no progress towards
    its target), onto a set-point's line near the goal (straight at the point of a slow
@@ -70,14 +71,16 @@ class HuskyCBFController:
         self._solver_fallbacks: list[str] = []  # this step's reasons the structured solver failed
         self._discs, self._disc_radius = disc_cover(config.footprint, config.disc_excess_m)
         # guidance's movers as wide as the NMPC's (_obstacles) at the horizon's middle
-        plan_s = config.response.command_delay_s + 0.5 * base.horizon * base.tau_s
+        plan_s = config.measurement_delay_s + 0.5 * base.horizon * base.tau_s
         growth_s = 0.5 * config.mover_sweep_s + config.mover_margin_per_m * plan_s
         self._guidance = Guidance(config.guidance, self._disc_radius + config.margin_m, growth_s)
         self._approach = LineApproach(config.guidance)
         self._evasion = MoverEvasion(config.guidance, self._disc_radius + config.margin_m)
         self._escape = Escape(config.escape, base.tau_s)
         self._step = extended_step(base.tau_s, config.response)
-        self._pipe = CommandPipe(config.response, base.tau_s)
+        self._pipe = CommandPipe(config.response, base.tau_s, config.measurement_delay_s)
+        #: from now to the instant the first command acts (s): the prediction's span less the latency
+        self._plan_start_s = max(self._pipe.delay_s - config.sensing_latency_s, 0.0)
         self._pose_filter = PoseFilter(config.pose_noise, base.tau_s)
         self._turns = TurnMonitor(round(config.weak_turn_window_s / base.tau_s), config.weak_turn_min_rad)
         self.reset()
@@ -319,7 +322,9 @@ class HuskyCBFController:
         if turn is not None:
             self._turns.update(self._predicted_turn, turn)
         z0, omega_now = self._initial_state(pose, turn)
-        t_plan = t + self._pipe.delay_s  # the plan starts when the drive acts on its first command
+        # the plan starts when the drive acts on its first command: the pose (and obstacles)
+        # measured sensing_latency_s ago, predicted over that and the drive's dead time
+        t_plan = t + self._plan_start_s
         sampled = reference.sample(t_plan, base.tau_s, base.horizon)
         now = sampled[0][0].copy()  # the reference at t_plan, before guidance replaces it
         stationary = self._nearly_stationary(reference, float(sampled[1][0, 0]))
@@ -388,7 +393,7 @@ class HuskyCBFController:
             guided=guided,
             solver=raw.solver,
             solver_fallback="; ".join(dict.fromkeys(self._solver_fallbacks)),
-            plan_start_s=self._pipe.delay_s,
+            plan_start_s=self._plan_start_s,
             escape=self._escape.phase,
         )
 

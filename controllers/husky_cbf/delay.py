@@ -25,12 +25,13 @@ _HELD = np.zeros(CONTROL_DIM)  # the command held over a sample: no acceleration
 
 class CommandPipe:
     """The commands sent so far as the drive applies them: rate-limited at the drive's acceleration
-    limits (m/s^2, rad/s^2), one sample per tau / SUBSTEPS (s), acted on after the dead time
-    (rounded to a whole sample)."""
+    limits (m/s^2, rad/s^2), one sample per tau / SUBSTEPS (s), acted on after `delay_s` (rounded
+    to a whole sample): the drive's dead time, plus the sensing latency when the pose predicted
+    from is that old (HuskyCBFConfig.measurement_delay_s)."""
 
-    def __init__(self, response: RobotResponse, tau_s: float) -> None:
+    def __init__(self, response: RobotResponse, tau_s: float, delay_s: float | None = None) -> None:
         self._h = tau_s / SUBSTEPS
-        self._delay = round(response.command_delay_s / self._h)
+        self._delay = round((response.command_delay_s if delay_s is None else delay_s) / self._h)
         self._step_limit = (
             np.array([response.max_linear_accel_mps2, response.max_angular_accel_radps2]) * self._h
         )

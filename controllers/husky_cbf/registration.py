@@ -1,5 +1,5 @@
 """husky-cbf, registered: configured from the scenario's NMPC settings (with Relax-CBF), the
-robot's drive limits, identified yaw response, footprint and reported pose noise, and the
+robot's drive limits, identified yaw response, footprint, reported pose noise and latency, and the
 scenario's `controller.husky_cbf` settings."""
 
 from __future__ import annotations
@@ -32,6 +32,7 @@ def configure(inputs: ControllerInputs) -> HuskyCBFConfig:
         omega_cmd_max_radps=robot.max_angular_radps,
         # what a localisation would report about its own noise
         pose_noise=PoseNoise(robot.pose_xy_std_m, robot.pose_yaw_std_rad),
+        sensing_latency_s=robot.sensing_latency_s,
     )
     config = apply_settings(config, inputs.settings)
     return dataclasses.replace(config, slots=min(max(inputs.obstacle_count, 1), config.slots))
@@ -53,6 +54,7 @@ def profile(config: HuskyCBFConfig) -> PlanProfile:
         body=BodyDiscs(len(centres), radius, (f.half_length_m, f.half_width_m), config.margin_m),
         planned_accel=(config.response.max_linear_accel_mps2, config.response.max_angular_accel_radps2),
         planned_dead_time_s=config.response.command_delay_s,
+        planned_latency_s=config.sensing_latency_s,
     )
 
 

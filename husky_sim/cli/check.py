@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+from typing import TYPE_CHECKING
 
 from husky_sim import interrupts
 from husky_sim.cli.common import (
@@ -19,21 +20,22 @@ from husky_sim.cli.common import (
     unit_float_arg,
 )
 
+if TYPE_CHECKING:
+    from husky_sim.realcheck.check import CheckOptions
+    from husky_sim.runs.scenario import Scenario
 
-def cmd_check(args: argparse.Namespace) -> int:
-    from pathlib import Path
 
-    from husky_sim.realcheck.check import CheckOptions, run_check
+def _options(args: argparse.Namespace, seed: int | None) -> CheckOptions:
+    """The check's options from the command line; integers are range-checked by CheckOptions, so
+    "--samples 0" is one line, exit 2."""
+    from husky_sim.realcheck.check import CheckOptions
     from husky_sim.realcheck.sweep import PerturbationRanges
-    from husky_sim.runs.run_folder import default_check_dir, prepare_out_dir
-    from husky_sim.runs.scenario import load_scenario
 
-    # integers are range-checked by CheckOptions, so "--samples 0" is one line, exit 2
-    options = CheckOptions(
+    return CheckOptions(
         controller=args.controller,
         horizon=args.horizon,
         samples=args.samples,
-        seed=args.seed,
+        seed=seed,
         jobs=args.jobs,
         backend=args.backend,
         scheduler=args.scheduler,
@@ -43,10 +45,28 @@ def cmd_check(args: argparse.Namespace) -> int:
         if args.payload_kg is None
         else PerturbationRanges(payload_kg=tuple(args.payload_kg)),
     )
-    sc = load_scenario(args.scenario).with_overrides(solver=args.solver)
-    horizon = sc.with_overrides(horizon=args.horizon).controller.horizon  # range-checked here
-    seed = sc.seed if args.seed is None else args.seed
+
+
+def _scenario(name: str, args: argparse.Namespace, options: CheckOptions) -> Scenario:
+    """The scenario on the chosen solver, its horizon and payload range checked before any work."""
+    from husky_sim.runs.scenario import load_scenario
+
+    sc = load_scenario(name).with_overrides(solver=args.solver)
+    sc.with_overrides(horizon=args.horizon)  # range-checked here
     options.ranges.for_robot(sc.robot.description())  # a payload the robot cannot carry: refused here
+    return sc
+
+
+def cmd_check(args: argparse.Namespace) -> int:
+    from pathlib import Path
+
+    from husky_sim.realcheck.check import run_check
+    from husky_sim.runs.run_folder import default_check_dir, prepare_out_dir
+
+    options = _options(args, args.seed)
+    sc = _scenario(args.scenario, args, options)
+    horizon = sc.with_overrides(horizon=args.horizon).controller.horizon
+    seed = sc.seed if args.seed is None else args.seed
     interrupts.begin_run()  # workers are stopped, not orphaned, on a signal
     out = prepare_out_dir(
         Path(args.out or default_check_dir(sc.name, args.controller, horizon, args.samples, seed))
@@ -59,24 +79,42 @@ def cmd_check(args: argparse.Namespace) -> int:
     return 0 if report.verdict == "PASS" else 1
 
 
-def add_parsers(sub: argparse._SubParsersAction) -> None:
-    """Register `check`."""
-    check = sub.add_parser("check", help="sim-to-real checks before a Husky trial: audit + robustness sweep")
-    check.add_argument("scenario", help="a scenario YAML path or the name of a shipped scenario")
-    check.add_argument("--controller", choices=controller_choices(), default=default_controller())
-    check.add_argument(
+def cmd_check_table(args: argparse.Namespace) -> int:
+    from pathlib import Path
+
+    from husky_sim.realcheck.check_table import run_check_table
+    from husky_sim.runs.run_folder import RESULTS_DIR, prepare_out_dir
+    from husky_sim.runs.scenario import shipped_scenarios
+
+    options = _options(args, None)
+    names = args.scenarios or [path.stem for path in shipped_scenarios()]
+    scenarios = [_scenario(name, args, options) for name in names]
+    interrupts.begin_run()
+    out = prepare_out_dir(Path(args.out or RESULTS_DIR / f"check_table__{args.controller}"))
+    cells = run_check_table(scenarios, args.seeds, options, out, log=print)
+    passed = sum(c.verdict == "PASS" for c in cells)
+    print(f"{passed} of {len(cells)} checks PASS -> {out / 'check_table.md'}, {out / 'check_table.json'}")
+    return 0 if passed == len(cells) else 1
+
+
+def _add_check_options(parser: argparse.ArgumentParser) -> None:
+    """What `check` and `check-table` share: the controller, N, samples, solver, workers, the pass
+    rate needed and the payload range."""
+    parser.add_argument("--controller", choices=controller_choices(), default=default_controller())
+    parser.add_argument(
         "--horizon", type=horizon_arg, default=None, help="prediction steps N (default: the file's)"
     )
-    check.add_argument("--samples", type=count_arg, default=32, help="perturbed runs K >= 1 (default 32)")
-    check.add_argument("--jobs", type=jobs_arg, default=None, help="worker processes (default: all cores)")
-    check.add_argument("--seed", type=seed_arg, default=None, help="perturbation seed >= 0")
-    add_solver_arg(check)
-    add_backend_args(check, "samples")
-    check.add_argument("--timing-solves", type=count_arg, default=100, help="NMPC solves timed (default 100)")
-    check.add_argument(
+    parser.add_argument("--samples", type=count_arg, default=32, help="perturbed runs K >= 1 (default 32)")
+    parser.add_argument("--jobs", type=jobs_arg, default=None, help="worker processes (default: all cores)")
+    add_solver_arg(parser)
+    add_backend_args(parser, "samples")
+    parser.add_argument(
+        "--timing-solves", type=count_arg, default=100, help="NMPC solves timed (default 100)"
+    )
+    parser.add_argument(
         "--min-pass-rate", type=unit_float_arg, default=0.95, help="pass rate needed in [0, 1] (default 0.95)"
     )
-    check.add_argument(
+    parser.add_argument(
         "--payload-kg",
         type=payload_arg,
         nargs=2,
@@ -86,7 +124,33 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
         "all-terrain payload: for the Husky, Clearpath's rating for turning in place); check with "
         "the payload the robot will carry",
     )
+
+
+def add_parsers(sub: argparse._SubParsersAction) -> None:
+    """Register `check` and `check-table`."""
+    check = sub.add_parser("check", help="sim-to-real checks before a Husky trial: audit + robustness sweep")
+    check.add_argument("scenario", help="a scenario YAML path or the name of a shipped scenario")
+    _add_check_options(check)
+    check.add_argument("--seed", type=seed_arg, default=None, help="perturbation seed >= 0")
     check.add_argument(
         "--out", type=path_arg, default=None, help="output directory (default results/check__...)"
     )
     check.set_defaults(func=cmd_check)
+
+    table = sub.add_parser(
+        "check-table", help="`check` over several scenarios and seeds, as one table (check_table.md)"
+    )
+    table.add_argument(
+        "scenarios", nargs="*", help="scenario YAML paths or shipped names (default: every shipped one)"
+    )
+    _add_check_options(table)
+    table.add_argument(
+        "--seeds", type=seed_arg, nargs="+", default=[1, 2, 3], help="perturbation seeds (default 1 2 3)"
+    )
+    table.add_argument(
+        "--out",
+        type=path_arg,
+        default=None,
+        help="output directory (default results/check_table__CONTROLLER)",
+    )
+    table.set_defaults(func=cmd_check_table)

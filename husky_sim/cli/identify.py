@@ -12,16 +12,18 @@ def cmd_identify(args: argparse.Namespace) -> int:
     from pathlib import Path
 
     from husky_sim.sim.robot_description import load_robot
-    from husky_sim.sim.yaw_response import identify_in_simulation, write_identification
+    from husky_sim.sim.yaw_response import PAYLOAD_FRACTIONS, identify_by_payload, write_identification
 
     robot = load_robot(args.robot)
-    identification = identify_in_simulation(robot=robot.name)
-    print("\n".join(identification.lines()))
+    most = robot.specs.spec_sheet.max_payload_kg
+    identifications = identify_by_payload([most * f for f in PAYLOAD_FRACTIONS], robot.name)
+    for identification in identifications:
+        print("\n".join(identification.lines()))
     out = Path(args.out) if args.out else robot.yaw_response_file
     command = "husky-sim identify" + ("" if robot.name == DEFAULT_ROBOT else f" --robot {robot.name}")
     command += "" if args.out is None else f" --out {args.out}"
     try:
-        write_identification(identification, out, command, robot.title)
+        write_identification(identifications, out, command, robot.title)
     except OSError as exc:
         raise UsageError(f"identify: cannot write {out} ({exc.strerror or exc})") from None
     print(f"-> {out}")

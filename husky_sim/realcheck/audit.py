@@ -12,8 +12,8 @@ Each finding is pass / warn / fail with the numbers behind it:
   husky-cbf plans its accelerations within its own bounds, checked against the drive's.
 - stopping distance at v_max (reaction over tau, the sensing latency, the ground's drive dead time
   and braking at the drive's deceleration) against the radius margin the plan keeps (husky-cbf
-  plans its braking and the dead time it is told of: only the latency and any dead time beyond
-  that are beyond its plan, against its disc margin).
+  plans its braking and the dead time and latency it is told of: only what goes beyond those is
+  beyond its plan, against its disc margin).
 - timing: tau against the p99 of solve times measured here on the scenario's kinematic closed
   loop; a plan that cannot be solved within tau is a FAIL.
 - obstacles and sensing: radii, motion and prediction model, noise and latency, stated.
@@ -271,19 +271,21 @@ def check_planned_acceleration(scenario: Scenario, name: str, accel: tuple[float
 
 def check_planned_stopping(scenario: Scenario, name: str, plan: PlanProfile) -> Finding:
     """Braking is in the controller's plan (husky-cbf keeps v^2 / 2a free at the horizon's end),
-    and so is the drive's dead time it is told of; the latency, which it does not know of, and any
-    dead time beyond its own can carry the robot past a planned stop."""
+    and so are the drive's dead time and the sensing latency it is told of; any latency or dead
+    time beyond those can carry the robot past a planned stop."""
     assert plan.body is not None and plan.planned_dead_time_s is not None
     margin = plan.body.margin_m
     reaction, latency, braking = stopping_distance_m(scenario)
     dead_time = dead_time_m(scenario)
     planned_dead_time = scenario.controller.v_max_mps * plan.planned_dead_time_s
-    unplanned = latency + max(dead_time - planned_dead_time, 0.0)
+    planned_latency = scenario.controller.v_max_mps * plan.planned_latency_s
+    unplanned = max(latency - planned_latency, 0.0) + max(dead_time - planned_dead_time, 0.0)
     values = {
         "reaction_m": reaction,
         "latency_m": latency,
         "dead_time_m": dead_time,
         "planned_dead_time_m": planned_dead_time,
+        "planned_latency_m": planned_latency,
         "braking_m": braking,
         "stopping_m": reaction + latency + dead_time + braking,
         "unplanned_overrun_m": unplanned,
@@ -292,8 +294,9 @@ def check_planned_stopping(scenario: Scenario, name: str, plan: PlanProfile) -> 
     text = (
         f"stop from v_max {scenario.controller.v_max_mps:g} m/s: {values['stopping_m']:.3f} m "
         f"({reaction:.3f} m over tau + {latency:.3f} m latency + {dead_time:.3f} m drive dead time + "
-        f"{braking:.3f} m braking; {name} plans the braking and {planned_dead_time:.3f} m of dead "
-        f"time); beyond the plan {unplanned:.3f} m vs disc margin {margin:.3f} m"
+        f"{braking:.3f} m braking; {name} plans the braking, {planned_dead_time:.3f} m of dead "
+        f"time and {planned_latency:.3f} m of latency); beyond the plan {unplanned:.3f} m vs disc "
+        f"margin {margin:.3f} m"
     )
     if unplanned > margin:
         return Finding(
@@ -308,8 +311,8 @@ def check_planned_stopping(scenario: Scenario, name: str, plan: PlanProfile) -> 
 
 def stopping_distance_m(scenario: Scenario) -> tuple[float, float, float]:
     """Distances (m) to stop from v_max: (reaction over one control period v tau, which the plan
-    knows of; latency v tau k, which it does not; braking v^2 / (2 a_drive), which it treats as
-    instant)."""
+    knows of; latency v tau k, which the paper's does not; braking v^2 / (2 a_drive), which it
+    treats as instant)."""
     v, drive = scenario.controller.v_max_mps, drive_config(scenario)
     reaction = v * scenario.tau_s
     latency = v * scenario.tau_s * scenario.sensing.latency_steps

@@ -48,7 +48,7 @@ from husky_sim.sim.outcomes import Outcomes
 from husky_sim.sim.robot_description import RobotDescription, load_robot, robot_names
 from husky_sim.sim.sensing import SensingConfig
 from husky_sim.sim.world import ObstacleSpec, WorldConfig
-from husky_sim.sim.yaw_response import GAIN_BOUNDS, TIME_CONSTANT_BOUNDS_S, YawResponse
+from husky_sim.sim.yaw_response import GAIN_BOUNDS, TIME_CONSTANT_BOUNDS_S, YawResponse, lag_for_payload
 
 if TYPE_CHECKING:
     from controllers import Controller, Reference
@@ -65,7 +65,6 @@ MAX_COORDINATE_M = 500.0
 MAX_PAYLOAD_KG = 1000.0
 #: Scenario names: what a run directory is named after, so no path separators or controls.
 NAME_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9_.+-]{0,79}$"
-#: Most characters of a bad value quoted in an error message.
 TWO_PI = 2 * math.pi
 
 
@@ -231,20 +230,34 @@ class YawResponseSpec(_Strict):
 
 
 @functools.cache
-def identified_yaw_response(robot: str = DEFAULT_ROBOT) -> YawResponse:
-    """The robot's yaw lag identified in PyBullet (`husky-sim identify`), read once from its
-    folder's yaw_response.yaml; a missing or malformed file is a one-line ScenarioError."""
+def identified_yaw_responses(robot: str = DEFAULT_ROBOT) -> tuple[tuple[float, YawResponse], ...]:
+    """The robot's yaw lags identified in PyBullet (`husky-sim identify`) by payload (kg), read
+    once from its folder's yaw_response.yaml (without `by_payload`, its headline lag for every
+    payload); a missing or malformed file is a one-line ScenarioError."""
     path = load_robot(robot).yaw_response_file
     source = f"{path} (the identified yaw response; `husky-sim identify` writes it)"
     try:
         data = read_scenario_data(path)
     except ScenarioFileError as exc:
         raise ScenarioError(f"{exc} (`husky-sim identify` writes it)") from None
-    wanted = {key: data[key] for key in YawResponseSpec.model_fields if key in data}
-    try:
-        return YawResponseSpec.model_validate_json(json.dumps(wanted, default=str), strict=True).params()
-    except ValidationError as exc:
-        raise ScenarioError(one_line(exc, source)) from None
+    headline = {key: data[key] for key in YawResponseSpec.model_fields if key in data}
+    lags = []
+    for i, row in enumerate(data.get("by_payload") or [{"payload_kg": 0.0}]):
+        if not isinstance(row, dict) or not isinstance(row.get("payload_kg"), int | float):
+            raise ScenarioError(f"{source}: by_payload[{i}]: needs a payload_kg number")
+        fields = {**headline, **{k: row[k] for k in ("gain", "time_constant_s") if k in row}}
+        try:
+            spec = YawResponseSpec.model_validate_json(json.dumps(fields, default=str), strict=True)
+        except ValidationError as exc:
+            raise ScenarioError(one_line(exc, source)) from None
+        lags.append((float(row["payload_kg"]), spec.params()))
+    return tuple(lags)
+
+
+def identified_yaw_response(robot: str = DEFAULT_ROBOT, payload_kg: float = 0.0) -> YawResponse:
+    """The robot's identified yaw lag with payload_kg (kg) on board: linear between the
+    identified payloads (husky_sim.sim.yaw_response.lag_for_payload)."""
+    return lag_for_payload(identified_yaw_responses(robot), payload_kg)
 
 
 def _robot_name(value: object) -> str:
@@ -290,10 +303,10 @@ class RobotSpec(_Strict):
 
     def yaw_response_params(self) -> YawResponse:
         """The robot's yaw-rate lag (gain, time constant s): the file's `yaw_response`, else the
-        one identified in PyBullet (its folder's yaw_response.yaml)."""
+        one identified in PyBullet with its payload (its folder's yaw_response.yaml)."""
         if self.yaw_response is not None:
             return self.yaw_response.params()
-        return identified_yaw_response(self.model)
+        return identified_yaw_response(self.model, self.payload_kg)
 
 
 class NMPCSpec(_Strict):

@@ -73,7 +73,7 @@ def nmpc_config(sc: Scenario) -> NMPCConfig:
 
 def robot_facts(sc: Scenario) -> RobotFacts:
     """What a controller is told of the robot: the drive's limits, the identified yaw response, the
-    URDF's footprint and the localisation's reported noise."""
+    URDF's footprint and the localisation's reported noise and latency."""
     drive = sc.drive_config()
     yaw = sc.robot.yaw_response_params()
     geometry = sc.robot.description().geometry
@@ -89,6 +89,7 @@ def robot_facts(sc: Scenario) -> RobotFacts:
         footprint_half_extents_m=geometry.footprint_half_extents_m,
         pose_xy_std_m=sc.sensing.pose_xy_std_m,
         pose_yaw_std_rad=sc.sensing.pose_yaw_std_rad,
+        sensing_latency_s=sc.sensing.latency_steps * sc.tau_s,
     )
 
 

@@ -34,6 +34,10 @@ TIME_CONSTANT_BOUNDS_S = (0.01, 10.0)
 #: Starting points (gain, time constant s) of the fit; the best local minimum is kept (a simulated
 #: skid-steer turn's yaw rate swings about the lag's curve, so the output error can have more than one).
 FIT_STARTS = ((0.5, 0.5), (0.3, 0.2), (1.0, 0.2), (0.3, 2.0), (1.0, 2.0))
+#: The payloads `husky-sim identify` fits at, as fractions of the robot's maximum payload: the
+#: unloaded robot first (the file's headline), then four loads up to the maximum (the Husky: 0,
+#: 18.75, 37.5, 56.25 and 75 kg).
+PAYLOAD_FRACTIONS = (0.0, 0.25, 0.5, 0.75, 1.0)
 #: A signal whose applied yaw rate never exceeds this (rad/s) does not identify a gain.
 MIN_EXCITATION_RADPS = 0.05
 
@@ -175,12 +179,14 @@ class Identification:
     steps: tuple[StepFit, ...]
     hold_s: float  # how long each step is held (s)
     sample_s: float  # sampling period of the fit (s)
+    payload_kg: float = 0.0  # on the robot's top plate while identified (kg)
 
     def lines(self) -> list[str]:
         """A human-readable report."""
         r = self.response
         out = [
-            f"yaw-rate lag: gain {r.gain:.3f}, time constant {r.time_constant_s:.3f} s behind the "
+            f"yaw-rate lag at {self.payload_kg:g} kg payload: gain {r.gain:.3f}, time constant "
+            f"{r.time_constant_s:.3f} s behind the "
             f"ground's dead time {r.delay_s:.3f} s, rms error "
             f"{self.rms_error_radps:.4f} rad/s over {len(self.steps)} steps of {self.hold_s:g} s "
             f"(sampled every {self.sample_s:g} s)",
@@ -215,10 +221,11 @@ def step_signal(
     drive: DriveConfig | None = None,
     delay_s: float = 0.0,
     robot: str = DEFAULT_ROBOT,
+    payload_kg: float = 0.0,
 ) -> Segment:
-    """Simulate the robot (its folder's name) from rest with (linear_mps, yaw_rate_radps)
-    commanded from t = 0 for hold_s (s) on its default ground; the applied yaw rate delayed by
-    delay_s (s, interval means) and the body yaw rate every sample_s (s)."""
+    """Simulate the robot (its folder's name, with payload_kg on its top plate) from rest with
+    (linear_mps, yaw_rate_radps) commanded from t = 0 for hold_s (s) on its default ground; the
+    applied yaw rate delayed by delay_s (s, interval means) and the body yaw rate every sample_s (s)."""
     from husky_sim.sim.open_loop import simulate_commands  # commands in, track out
 
     track = simulate_commands(
@@ -229,6 +236,7 @@ def step_signal(
         world=world,
         drive=drive,
         robot=robot,
+        payload_kg=payload_kg,
     )
     every = max(round(sample_s / float(track.t_s[1] - track.t_s[0])), 1)
     idx = np.arange(0, len(track.t_s), every)
@@ -246,17 +254,21 @@ def identify_in_simulation(
     world: WorldConfig | None = None,
     drive: DriveConfig | None = None,
     robot: str = DEFAULT_ROBOT,
+    payload_kg: float = 0.0,
 ) -> Identification:
     """Yaw-rate steps (rad/s) at each linear speed (m/s), each from rest and held hold_s (s), on
-    the robot's default ground with the default (or given) WorldConfig and DriveConfig; one lag
-    fitted to all, behind the ground's dead time. Deterministic (PyBullet DIRECT, no noise)."""
+    the robot's default ground with payload_kg (kg) on its top plate and the default (or given)
+    WorldConfig and DriveConfig; one lag fitted to all, behind the ground's dead time.
+    Deterministic (PyBullet DIRECT, no noise)."""
     from husky_sim.sim.ground import load_ground
 
     if not (0 < sample_s <= hold_s) or not math.isfinite(hold_s):
         raise ValueError(f"identify: need 0 < sample_s <= hold_s, got {sample_s:g} and {hold_s:g}")
     delay_s = load_ground(robot=robot).drive.command_delay_s
     commands = [(v, w) for v in linear_speeds_mps for w in yaw_rates_radps]
-    segments = [step_signal(v, w, hold_s, sample_s, world, drive, delay_s, robot) for v, w in commands]
+    segments = [
+        step_signal(v, w, hold_s, sample_s, world, drive, delay_s, robot, payload_kg) for v, w in commands
+    ]
     response, total = fit_segments(segments, delay_s)
     steps = []
     for (v, w), segment in zip(commands, segments, strict=True):
@@ -271,15 +283,34 @@ def identify_in_simulation(
                 late_ratio=float(np.mean(segment[2][len(segment[2]) // 2 :]) / w),
             )
         )
-    return Identification(response, total, tuple(steps), hold_s, sample_s)
+    return Identification(response, total, tuple(steps), hold_s, sample_s, payload_kg)
+
+
+def identify_by_payload(
+    payloads_kg: Sequence[float], robot: str = DEFAULT_ROBOT
+) -> tuple[Identification, ...]:
+    """`identify_in_simulation` at each payload (kg; the first is the file's headline, the
+    unloaded robot's): a loaded skid-steer turns less and later than an empty one, and a
+    controller told its payload plans with the lag of that load (`lag_for_payload`)."""
+    return tuple(identify_in_simulation(robot=robot, payload_kg=float(p)) for p in payloads_kg)
+
+
+def lag_for_payload(by_payload: Sequence[tuple[float, YawResponse]], payload_kg: float) -> YawResponse:
+    """The lag at payload_kg (kg), linear in the payload between the identified ones (gain and
+    time constant; held beyond the ends); the dead time is the ground's, the same for all."""
+    points = sorted(by_payload, key=lambda item: item[0])
+    loads = [p for p, _ in points]
+    gain = float(np.interp(payload_kg, loads, [r.gain for _, r in points]))
+    lag = float(np.interp(payload_kg, loads, [r.time_constant_s for _, r in points]))
+    return YawResponse(gain, lag, points[0][1].delay_s)
 
 
 def write_identification(
-    identification: Identification, path: Path, command: str, robot_title: str = "Husky A200"
+    identifications: Sequence[Identification], path: Path, command: str, robot_title: str = "Husky A200"
 ) -> None:
     """Write the identification of the robot `robot_title` as YAML to path, with a comment header
-    naming `command` and the UTC time; `gain` and `time_constant_s` are what a scenario's default
-    yaw response reads."""
+    naming `command` and the UTC time: the first (unloaded) one in full, and the lag at every
+    payload under `by_payload`, which a scenario's default yaw response reads for its payload."""
     from datetime import UTC, datetime
 
     from husky_sim.scenario_file import scenario_yaml
@@ -294,7 +325,20 @@ def write_identification(
         "body yaw rate (rad/s).\n"
         "Fitted to yaw-rate steps from rest at each linear speed; steps: the joint fit's rms error on\n"
         "each step, a lag fitted to that step alone, and the mean measured / commanded yaw rate over\n"
-        "the step's second half. The default of every scenario without robot.yaw_response."
+        "the step's second half, all unloaded. by_payload: the same fit with each payload (kg) on\n"
+        "the top plate. The default of every scenario without robot.yaw_response, at its payload\n"
+        "(linear between these)."
     )
+    first, *_ = identifications
+    data = first.data()
+    data["by_payload"] = [
+        {
+            "payload_kg": round(i.payload_kg, 4),
+            "gain": round(i.response.gain, 4),
+            "time_constant_s": round(i.response.time_constant_s, 4),
+            "rms_error_radps": round(i.rms_error_radps, 5),
+        }
+        for i in identifications
+    ]
     path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(scenario_yaml(identification.data(), header))
+    path.write_text(scenario_yaml(data, header))

@@ -32,9 +32,10 @@ from husky_sim.runs.scenario import (
 from husky_sim.scenario_file import read_scenario_data
 from husky_sim.sim.ground import load_ground
 from husky_sim.sim.open_loop import simulate_commands
-from husky_sim.sim.robot_description import RobotDescription
+from husky_sim.sim.robot_description import RobotDescription, load_robot
 from husky_sim.sim.yaw_response import (
     DEFAULT_FILE,
+    PAYLOAD_FRACTIONS,
     YawResponse,
     fit_segments,
     fit_yaw_response,
@@ -131,6 +132,39 @@ def test_shipped_default_is_the_current_identification(identified: dict[str, obj
         assert robot.yaw_response_params() == lag
 
 
+def test_shipped_lag_by_payload_is_the_current_identification(identified: dict[str, object]) -> None:
+    """The file holds the lag at each identified payload (0 to the Husky's 75 kg), the fresh
+    identification reproduces it, the loaded robot turns less or later than the empty one, and a
+    scenario's default lag is the one for its payload (linear between the identified ones)."""
+    shipped = read_scenario_data(DEFAULT_FILE)["by_payload"]
+    fresh = identified["by_payload"]
+    most = load_robot().specs.spec_sheet.max_payload_kg
+    assert [row["payload_kg"] for row in shipped] == [most * f for f in PAYLOAD_FRACTIONS]
+    for old, new in zip(shipped, fresh, strict=True):
+        assert old["payload_kg"] == new["payload_kg"]
+        assert old["gain"] == pytest.approx(new["gain"], abs=1e-3), old["payload_kg"]
+        assert old["time_constant_s"] == pytest.approx(new["time_constant_s"], abs=1e-3), old["payload_kg"]
+    empty, full = shipped[0], shipped[-1]
+    headline = read_scenario_data(DEFAULT_FILE)
+    assert (empty["gain"], empty["time_constant_s"]) == (headline["gain"], headline["time_constant_s"])
+    assert full["gain"] < empty["gain"] or full["time_constant_s"] > empty["time_constant_s"]
+    base = load_scenario("husky_point_stabilisation")
+    for row in shipped:
+        loaded = base.model_copy(
+            update={"robot": base.robot.model_copy(update={"payload_kg": row["payload_kg"]})}
+        )
+        lag = loaded.robot.yaw_response_params()
+        assert (lag.gain, lag.time_constant_s) == (row["gain"], row["time_constant_s"])
+        assert loaded.controller_config("husky-cbf").response.yaw_gain == row["gain"]
+    a, b = shipped[1], shipped[2]
+    between = base.model_copy(
+        update={
+            "robot": base.robot.model_copy(update={"payload_kg": 0.5 * (a["payload_kg"] + b["payload_kg"])})
+        }
+    )
+    assert between.robot.yaw_response_params().gain == pytest.approx(0.5 * (a["gain"] + b["gain"]))
+
+
 def _scenario_data(yaw_response: object) -> dict:
     data = load_scenario("husky_point_stabilisation").model_dump(mode="json")
     data["robot"]["yaw_response"] = yaw_response
@@ -177,13 +211,13 @@ def test_missing_or_malformed_default_is_one_line(
     if content is not None:
         path.write_text(content)
     monkeypatch.setattr(RobotDescription, "yaw_response_file", property(lambda _: path))
-    scenario_module.identified_yaw_response.cache_clear()
+    scenario_module.identified_yaw_responses.cache_clear()
     try:
         robot = load_scenario("husky_point_stabilisation").robot
         with pytest.raises(ScenarioError) as error:
             robot.yaw_response_params()
     finally:
-        scenario_module.identified_yaw_response.cache_clear()
+        scenario_module.identified_yaw_responses.cache_clear()
     assert str(path) in str(error.value) and message in str(error.value)
     assert "\n" not in str(error.value)
 

@@ -344,3 +344,21 @@ def test_with_a_dead_time_longer_than_tau_the_step_now_is_the_past_commands() ->
 def test_husky_cbf_is_told_the_default_grounds_dead_time() -> None:
     response = load_scenario("husky_point_stabilisation").controller_config("husky-cbf").response
     assert response.command_delay_s == load_ground().drive.command_delay_s > 0.3
+
+
+def test_husky_cbf_plans_over_the_sensing_latency_it_is_told() -> None:
+    """A pose and obstacles measured two steps ago: the prediction spans the latency and the
+    drive's dead time, while the plan still starts when the drive acts (the dead time from now);
+    the reference is sampled from then, not later. Without a latency, as before."""
+    base = load_scenario("head_on_moving_obstacle")
+    late = base.model_copy(update={"sensing": base.sensing.model_copy(update={"latency_steps": 2})})
+    told, untold = late.controller_config("husky-cbf"), base.controller_config("husky-cbf")
+    dead = untold.response.command_delay_s
+    assert told.sensing_latency_s == pytest.approx(2 * base.tau_s) and untold.sensing_latency_s == 0.0
+    assert told.measurement_delay_s == pytest.approx(dead + 2 * base.tau_s)
+    assert late.plan_profile("husky-cbf").planned_latency_s == pytest.approx(2 * base.tau_s)
+    pipe = CommandPipe(told.response, base.tau_s, told.measurement_delay_s)
+    assert pipe.delay_s == pytest.approx(_pipe(dead + 2 * base.tau_s, base.tau_s).delay_s)
+    controller = late.make_controller("husky-cbf")
+    result = controller.solve(np.array([0.0, 0.0, 0.0]), late.reference_object(), [], 0.0)
+    assert result.plan_start_s == pytest.approx(CommandPipe(told.response, base.tau_s).delay_s)
