@@ -59,17 +59,22 @@ def test_controllers_sharing_a_solver_run_as_they_would_alone() -> None:
 
 @pytest.mark.parametrize("scenario", ["head_on_moving_obstacle"])
 def test_a_sweep_builds_husky_cbf_once_per_problem(scenario: str) -> None:
-    """Samples of a check differ in the robot and the world, not in the NLPs (the pose filter's
-    noise is no part of them): a second controller reuses the first's solvers."""
+    """Samples of a check with one payload differ in the robot and the world, not in the NLPs (the
+    pose filter's noise is no part of them): a second controller reuses the first's solvers. The
+    payload is: husky-cbf plans with the yaw lag of the payload it is told, so another payload
+    is another problem."""
+    from dataclasses import replace
+
     from husky_sim.realcheck.check import CheckOptions
     from husky_sim.realcheck.sweep import apply_perturbation, sample_perturbations
 
     forget_shared_solvers()
     base = load_scenario(scenario)
-    samples = [
-        apply_perturbation(base, p)
-        for p in sample_perturbations(CheckOptions().ranges.for_robot(base.robot.description()), 2, 0)
-    ]
+    ranges = replace(CheckOptions().ranges, payload_kg=(10.0, 10.0)).for_robot(base.robot.description())
+    samples = [apply_perturbation(base, p) for p in sample_perturbations(ranges, 2, 0)]
     first, second = (s.make_controller("husky-cbf") for s in samples)
     assert samples[0].controller_config("husky-cbf") != samples[1].controller_config("husky-cbf")
     assert first._hard is second._hard and first._soft is second._soft
+    heavier = replace(ranges, payload_kg=(40.0, 40.0))
+    loaded = apply_perturbation(base, sample_perturbations(heavier, 1, 0)[0]).make_controller("husky-cbf")
+    assert loaded._hard is not first._hard
