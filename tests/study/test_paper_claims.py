@@ -108,9 +108,12 @@ EXPECTED = [
 
 #: Claims whose verdict rests on a knife-edge mover cell, with the verdicts measured otherwise (on
 #: another CPU, or after a change of the solver's answers within its tolerance). Either the published
-#: or this verdict passes; any other fails. The two alternatives recorded here before were measured
-#: on the uncalibrated plant and no longer apply; none has been measured on the calibrated one yet.
-MEASURED_OTHERWISE: dict[str, tuple[str, str]] = {}
+#: or this verdict passes; any other fails. Measured on the calibrated plant.
+MEASURED_OTHERWISE: dict[str, tuple[str, str]] = {
+    # AMD EPYC, 2026-12-04 (the same at 7b09eb3 and d4bb220): Relax-CBF N = 12, gamma = 0.2 collides
+    # with the mover (clearance -0.017 m) where it tracks on the Intel Xeon the table was measured on
+    "paper_dynamic_tracking, N = 12: BT and Relax-CBF (gamma = 0.2) track safely": ("reproduced", "partly"),
+}
 
 
 @pytest.mark.slow
