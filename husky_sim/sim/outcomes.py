@@ -7,7 +7,7 @@ the same reasons."""
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -108,12 +108,33 @@ def reference_reachable(
     return np.all(distance > np.asarray(obstacle_radius_m, dtype=float) + robot_radius_m, axis=-1)
 
 
+def reference_blocked_around(
+    reference: Reference,
+    obstacle_centres: Callable[[float], np.ndarray],
+    obstacle_radius_m: np.ndarray,
+    robot_radius_m: float,
+    t_s: float,
+    ahead_s: float,
+    tau_s: float,
+) -> bool:
+    """Whether the reference point is unreachable (reference_reachable) at t_s or at any control
+    instant up to ahead_s (s) later: the obstacles' true motion is the simulator's to know."""
+    times = t_s + tau_s * np.arange(round(ahead_s / tau_s) + 1)
+    for t in times:
+        ref = reference.state_at(float(t))[:2]
+        if not reference_reachable(ref, obstacle_centres(float(t)), obstacle_radius_m, robot_radius_m):
+            return True
+    return False
+
+
 class OutcomeMonitor:
     """Names the outcome after each control step: `collided` when the clearance reaches
     -contact_tolerance_m (whatever happens after it), `reached` when a set-point is held within its
     tolerance for `goal_hold_s`, `stuck` when the robot idles away from the reference
-    (is_stuck_window); `update` says whether the episode ends there (Outcomes.stop_on_collision,
-    stop_early; a held goal ends it even after a collision, which still names it).
+    (is_stuck_window) and was not waiting for its reference to come free in the last
+    stuck_grace_s (`update`'s `waiting`); `update` says whether the episode ends there
+    (Outcomes.stop_on_collision, stop_early; a held goal ends it even after a collision, which
+    still names it).
 
     `contact_tolerance_m`: 0 for the physics engine's clearance; the kinematic loop's exact circle
     model meets a constraint boundary to the solver's tolerance, which is contact, not collision.
@@ -141,14 +162,26 @@ class OutcomeMonitor:
         self.outcome: str | None = None
         self.goal_held = False  # the set-point was held for goal_hold_s (even after a collision)
         self.reached_at: float | None = None  # s: entry into the tolerance band that was then held
+        self._waited_at = -math.inf  # s: the last step at which the robot was waiting (update)
 
     def update(
-        self, t_next: float, pose: np.ndarray, clearance: float, rows: Sequence[dict[str, object]]
+        self,
+        t_next: float,
+        pose: np.ndarray,
+        clearance: float,
+        rows: Sequence[dict[str, object]],
+        waiting: bool = False,
     ) -> bool:
         """Judge the step that ended at t_next (s) with the robot at `pose` (x m, y m, yaw rad) and
         the smallest clearance (m) over its physics steps; `rows` are the control steps so far
-        (the stuck rule reads their velocities, commands and fallbacks). True: stop here."""
+        (the stuck rule reads their velocities, commands and fallbacks). `waiting`: the reference
+        is unreachable now or within leave_s (reference_blocked_around). A robot that waits for a
+        mover to pass its reference is not deadlocked, so the stuck rule is not judged until
+        stuck_grace_s after that; a reference that never comes free still fails, as a timeout or
+        as tracking not converged. True: stop here."""
         outcomes = self.outcomes
+        if waiting:
+            self._waited_at = t_next
         if clearance <= -self._contact_tolerance_m:
             self.outcome = "collided"  # a collision names the episode whatever happens after it
             if outcomes.stop_on_collision:
@@ -170,6 +203,7 @@ class OutcomeMonitor:
             not self._stuck_at_end
             and self._away(pos_err)
             and t_next >= outcomes.stuck_grace_s
+            and t_next - self._waited_at >= outcomes.stuck_grace_s
             and is_stuck_window(rows, outcomes)
             and self.outcome is None
         ):

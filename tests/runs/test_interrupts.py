@@ -29,7 +29,7 @@ from husky_sim.runs.parallel import process_map
 from husky_sim.runs.scenario import load_scenario, resolve
 from husky_sim.scenario_file import scenario_yaml
 from husky_sim.sim.episode import EpisodeConfig, run_episode
-from husky_sim.sim.outcomes import Outcomes, is_stuck_window
+from husky_sim.sim.outcomes import OutcomeMonitor, Outcomes, is_stuck_window
 from husky_sim.sim.world import World
 
 pytestmark = pytest.mark.physics  # PyBullet or closed loops throughout (`make test-fast` skips)
@@ -313,3 +313,27 @@ def test_a_signal_at_any_physics_step_leaves_a_whole_trace(tmp_path: Path, monke
     trace = result.trace
     assert len(trace.sample_t_s) == len(trace.base_position_m) == len(trace.base_orientation_xyzw)
     assert len(trace.obstacle_xy_m) == len(trace.sample_t_s)
+
+
+def test_a_robot_waiting_for_its_reference_to_come_free_is_not_stuck() -> None:
+    """Waiting while the reference is unreachable (a mover over the goal) is not a deadlock;
+    idling stuck_grace_s after it came free is."""
+    outcomes, tau = Outcomes(), 0.1
+    goal = SetPoint(5.0, 0.0, 0.0)
+
+    def idle_for(monitor: OutcomeMonitor, seconds: float, start_s: float, waiting: bool) -> float:
+        rows: list[dict] = []
+        for k in range(1, round(seconds / tau) + 1):
+            t = start_s + k * tau
+            rows += _rows(0.0, 0.0, 0.0, 0.0)[:1]
+            if monitor.update(t, np.zeros(3), 1.0, rows, waiting):
+                return t
+        return math.inf
+
+    waits = OutcomeMonitor(goal, outcomes, tau)
+    assert idle_for(waits, 10.0, 0.0, waiting=True) == math.inf and waits.outcome is None
+    stuck_at = idle_for(waits, 10.0, 10.0, waiting=False)
+    assert waits.outcome == "stuck"
+    assert stuck_at == pytest.approx(10.0 + outcomes.stuck_grace_s)  # judged again after the grace
+    never_waited = OutcomeMonitor(goal, outcomes, tau)
+    assert idle_for(never_waited, 10.0, 0.0, waiting=False) == pytest.approx(outcomes.stuck_grace_s)
