@@ -162,9 +162,7 @@ class HuskyCBFController:
         if target is not None:
             goal = np.array([target.x_m, target.y_m, target.heading_rad])
         tabu = self._escape.tabu_circles(t)
-        waypoint = (
-            self._guidance.waypoint(pose[:2], goal, obstacles, tabu, hold_for_movers=stationary) or target
-        )
+        waypoint = self._guidance.waypoint(pose[:2], goal, obstacles, tabu) or target
         if waypoint is None:
             return ref_states, ref_controls, False
         target = [waypoint.x_m, waypoint.y_m, waypoint.heading_rad]

@@ -128,13 +128,9 @@ class Guidance:
         goal: np.ndarray,
         obstacles: Sequence[Obstacle],
         extra: np.ndarray | None = None,
-        hold_for_movers: bool = False,
     ) -> Waypoint | None:
         """A waypoint toward goal [x, y, heading] (m, m, rad) if the straight way is blocked by
-        the obstacles or the `extra` circles [x, y, r] (m). `hold_for_movers`: a goal that stays
-        where it is (a set-point, a slow trajectory's point) and that a mover covers is waited
-        for (_hold); a moving reference's goal is not: it moves on, so the path goes where it
-        will be free."""
+        the obstacles or the `extra` circles [x, y, r] (m)."""
         cfg = self.config
         robot_xy = np.asarray(robot_xy, dtype=float)
         circles = self.circles(robot_xy, obstacles, extra)
@@ -142,9 +138,6 @@ class Guidance:
         if not segment_blocked(robot_xy, goal[:2], circles, extra):
             self.guided, self.path = False, None
             return None
-        if hold_for_movers and self._mover_covers(goal[:2], robot_xy, obstacles):
-            self.guided, self.path = True, None
-            return self._hold(robot_xy, goal)
         # among movers the way round changes for real from step to step: no hysteresis
         static = all(math.hypot(o.vx_mps, o.vy_mps) <= cfg.static_speed_mps for o in obstacles)
         path = self._shortest_path(robot_xy, np.asarray(goal[:2], dtype=float), circles, static)
@@ -153,28 +146,6 @@ class Guidance:
             return None
         self.guided, self.path = True, path
         return self._carrot(robot_xy, path, circles, goal)
-
-    def _mover_covers(self, goal_xy: np.ndarray, robot_xy: np.ndarray, obstacles: Sequence[Obstacle]) -> bool:
-        """Whether a mover's inflated sweep (inflated_circles) covers the goal (m)."""
-        movers = [o for o in obstacles if math.hypot(o.vx_mps, o.vy_mps) > self.config.static_speed_mps]
-        if not movers:
-            return False
-        circles = inflated_circles(
-            movers, self.inflation_m, self.config.mover_sweep_s, robot_xy, self.mover_growth_s
-        )
-        return bool(np.any(np.hypot(*(circles[:, :2] - goal_xy).T) < circles[:, 2]))
-
-    @staticmethod
-    def _hold(robot_xy: np.ndarray, goal: np.ndarray) -> Waypoint:
-        """Stay where the robot is, facing the goal: a mover is passing over it. The free cell
-        nearest such a goal lies ahead of the mover on its track, so a path to it led the robot in
-        front of the mover (chased off, 10 to 14 s to rejoin: check of slow_circle_among_movers);
-        the goal is free again once the mover has passed, and a robot already facing it drives
-        straight back (the approach that follows drives forwards: a robot that held with its back
-        to the goal first pivoted half a turn). Out of the mover's way it is stepped by
-        MoverEvasion, which comes first."""
-        bearing = math.atan2(goal[1] - robot_xy[1], goal[0] - robot_xy[0])
-        return Waypoint(float(robot_xy[0]), float(robot_xy[1]), bearing, np.array([robot_xy, robot_xy]))
 
     def _shortest_path(
         self, start: np.ndarray, goal: np.ndarray, circles: np.ndarray, sticky: bool

@@ -193,22 +193,6 @@ def test_guidance_routes_round_a_blocking_obstacle_and_leaves_a_clear_line_alone
     assert math.hypot(waypoint.path[-1, 0] - 8.0, waypoint.path[-1, 1]) < 0.1
 
 
-def test_guidance_holds_while_a_mover_passes_over_a_goal_that_stays() -> None:
-    """A mover crossing a set-point's goal: the robot holds where it is, facing the goal, instead
-    of a path to the free cell nearest the goal, which lies ahead of the mover on its track. A
-    moving reference's goal is gone round (it moves on), and so is a static obstacle on a goal."""
-    guidance = Guidance(GuidanceConfig(), inflation_m=0.48)
-    goal = np.array([0.0, 2.0, 0.0])
-    mover = [Obstacle(-1.0, 2.0, 0.3, vx_mps=0.5)]  # reaches the goal in 2 s
-    hold = guidance.waypoint(np.zeros(2), goal, mover, hold_for_movers=True)
-    assert hold is not None and guidance.guided
-    assert (hold.x_m, hold.y_m, hold.heading_rad) == pytest.approx((0.0, 0.0, math.pi / 2))
-    moving = guidance.waypoint(np.zeros(2), goal, mover, hold_for_movers=False)
-    assert moving is not None and math.hypot(moving.x_m, moving.y_m) > 0.5
-    static = guidance.waypoint(np.zeros(2), goal, [Obstacle(0.0, 2.2, 0.3)], hold_for_movers=True)
-    assert static is not None and math.hypot(static.x_m, static.y_m) > 0.5
-
-
 def test_the_way_round_a_static_obstacle_dead_ahead_keeps_its_side_under_noise() -> None:
     """An obstacle dead ahead measured 3 cm to one side, then the other: without hysteresis the
     shortest way round changes sides; with it the robot keeps the side it took. Among movers there
