@@ -108,23 +108,37 @@ def reference_reachable(
     return np.all(distance > np.asarray(obstacle_radius_m, dtype=float) + robot_radius_m, axis=-1)
 
 
-def reference_blocked_around(
-    reference: Reference,
-    obstacle_centres: Callable[[float], np.ndarray],
-    obstacle_radius_m: np.ndarray,
-    robot_radius_m: float,
-    t_s: float,
-    ahead_s: float,
-    tau_s: float,
-) -> bool:
-    """Whether the reference point is unreachable (reference_reachable) at t_s or at any control
-    instant up to ahead_s (s) later: the obstacles' true motion is the simulator's to know."""
-    times = t_s + tau_s * np.arange(round(ahead_s / tau_s) + 1)
-    for t in times:
-        ref = reference.state_at(float(t))[:2]
-        if not reference_reachable(ref, obstacle_centres(float(t)), obstacle_radius_m, robot_radius_m):
-            return True
-    return False
+class ReferenceBlockage:
+    """The latest control instant (s) at which the reference point is unreachable
+    (reference_reachable), looked ahead_s (s) into the obstacles' true motion, which is the
+    simulator's to know. Each instant k tau is judged once, as the look-ahead reaches it."""
+
+    def __init__(
+        self,
+        reference: Reference,
+        obstacle_centres: Callable[[float], np.ndarray],
+        obstacle_radius_m: np.ndarray,
+        robot_radius_m: float,
+        tau_s: float,
+        ahead_s: float,
+    ) -> None:
+        self._reference, self._centres = reference, obstacle_centres
+        self._radii, self._robot_radius_m = obstacle_radius_m, robot_radius_m
+        self._tau_s, self._ahead_steps = tau_s, round(ahead_s / tau_s)
+        self._next_step = 0  # the first instant not yet judged, in steps of tau
+        self._latest_s = -math.inf
+
+    def waiting(self, step: int) -> bool:
+        """Whether the reference is unreachable at control step `step` or at any instant up to
+        ahead_s after the next one (the window OutcomeMonitor.update's `waiting` means)."""
+        last = step + 1 + self._ahead_steps
+        while self._next_step <= last:
+            t = self._next_step * self._tau_s
+            ref = self._reference.state_at(t)[:2]
+            if not reference_reachable(ref, self._centres(t), self._radii, self._robot_radius_m):
+                self._latest_s = t
+            self._next_step += 1
+        return self._latest_s >= step * self._tau_s - 1e-9
 
 
 class OutcomeMonitor:
@@ -175,7 +189,7 @@ class OutcomeMonitor:
         """Judge the step that ended at t_next (s) with the robot at `pose` (x m, y m, yaw rad) and
         the smallest clearance (m) over its physics steps; `rows` are the control steps so far
         (the stuck rule reads their velocities, commands and fallbacks). `waiting`: the reference
-        is unreachable now or within leave_s (reference_blocked_around). A robot that waits for a
+        is unreachable now or within leave_s (ReferenceBlockage). A robot that waits for a
         mover to pass its reference is not deadlocked, so the stuck rule is not judged until
         stuck_grace_s after that; a reference that never comes free still fails, as a timeout or
         as tracking not converged. True: stop here."""

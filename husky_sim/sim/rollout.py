@@ -23,7 +23,7 @@ from controllers import Controller, ControlResult, Reference
 from controllers.model import wrap_angle
 from husky_sim import interrupts
 from husky_sim.interrupts import RunInterrupted
-from husky_sim.sim.outcomes import OutcomeMonitor, reference_blocked_around, reference_reachable
+from husky_sim.sim.outcomes import OutcomeMonitor, ReferenceBlockage, reference_reachable
 from husky_sim.sim.sensing import Measurement
 from husky_sim.sim.step_log import StepLog
 
@@ -117,6 +117,14 @@ def rollout(
     plans: list[np.ndarray] = []
     command = np.zeros(2)
     interrupted_by: int | None = None
+    blockage = ReferenceBlockage(
+        reference,
+        plant.obstacle_centres,
+        plant.obstacle_radii_m,
+        plant.footprint_radius_m,
+        tau_s,
+        monitor.outcomes.leave_s,
+    )
     try:
         for k in range(steps):
             interrupts.check()  # also a signal that a library swallowed
@@ -144,16 +152,7 @@ def rollout(
                 plans.append(result.predicted_states)
             if observer is not None:
                 observer.on_step(row, result, centres)
-            waiting = not reachable or reference_blocked_around(
-                reference,
-                plant.obstacle_centres,
-                plant.obstacle_radii_m,
-                plant.footprint_radius_m,
-                t + tau_s,
-                monitor.outcomes.leave_s,
-                tau_s,
-            )
-            if monitor.update(t + tau_s, new_pose, clearance, rows, waiting):
+            if monitor.update(t + tau_s, new_pose, clearance, rows, blockage.waiting(k)):
                 break
     except (RunInterrupted, KeyboardInterrupt) as exc:  # the steps so far are kept and judged as such
         interrupted_by = interrupts.signum_of(exc)

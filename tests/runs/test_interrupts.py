@@ -29,7 +29,7 @@ from husky_sim.runs.parallel import process_map
 from husky_sim.runs.scenario import load_scenario, resolve
 from husky_sim.scenario_file import scenario_yaml
 from husky_sim.sim.episode import EpisodeConfig, run_episode
-from husky_sim.sim.outcomes import OutcomeMonitor, Outcomes, is_stuck_window
+from husky_sim.sim.outcomes import OutcomeMonitor, Outcomes, ReferenceBlockage, is_stuck_window
 from husky_sim.sim.world import World
 
 pytestmark = pytest.mark.physics  # PyBullet or closed loops throughout (`make test-fast` skips)
@@ -337,3 +337,19 @@ def test_a_robot_waiting_for_its_reference_to_come_free_is_not_stuck() -> None:
     assert stuck_at == pytest.approx(10.0 + outcomes.stuck_grace_s)  # judged again after the grace
     never_waited = OutcomeMonitor(goal, outcomes, tau)
     assert idle_for(never_waited, 10.0, 0.0, waiting=False) == pytest.approx(outcomes.stuck_grace_s)
+
+
+def test_the_reference_is_waited_for_from_leave_s_before_it_is_covered_until_it_is_free() -> None:
+    """A 0.3 m obstacle crosses the goal at 1 m/s (covered, with a 0.5 m robot, while it is
+    within 0.8 m: 4.2 to 5.8 s); `waiting` holds at the steps whose window, now to leave_s after
+    the next step, meets that (2.1 to 5.8 s) and at no other."""
+    tau, leave = 0.1, 2.0
+    goal = SetPoint(5.0, 0.0, 0.0)
+
+    def centres(t_s: float) -> np.ndarray:
+        return np.array([[t_s, 0.0]])
+
+    blockage = ReferenceBlockage(goal, centres, np.array([0.3]), 0.5, tau, leave)
+    waiting = [k for k in range(100) if blockage.waiting(k)]
+    assert waiting == list(range(21, 58))
+
