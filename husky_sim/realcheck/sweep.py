@@ -45,6 +45,21 @@ from husky_sim.sim.tyre import stiffness_ratio_for_yaw_ratio
 
 #: Per-sample result keys that are wall-clock measurements (excluded from determinism checks).
 WALL_CLOCK_KEYS = ("solve_ms_median", "solve_ms_p95", "solve_ms_max", "wall_time_s")
+#: A sample's result: these fields of its run summary (run_sample; None where it crashed)
+SAMPLE_KEYS = (
+    "outcome",
+    "collided",
+    "converged",
+    "min_clearance_m",
+    "final_position_error_m",
+    "tracking_rmse_m",
+    "tracking_rmse_reachable_m",
+    "rejoin_time_max_s",
+    "time_to_goal_s",
+    "fallbacks",
+    "steps",
+    *WALL_CLOCK_KEYS,
+)
 
 
 @dataclass(frozen=True)
@@ -200,21 +215,7 @@ def run_sample(task: SampleTask) -> dict[str, Any]:
 
     scenario = scenario_from_data(task.scenario, f"check sample {task.index}")
     summary = run_scenario(scenario, task.controller).as_dict()  # horizon, gamma, seed: in the scenario
-    keys = (
-        "outcome",
-        "collided",
-        "converged",
-        "min_clearance_m",
-        "final_position_error_m",
-        "tracking_rmse_m",
-        "tracking_rmse_reachable_m",
-        "rejoin_time_max_s",
-        "time_to_goal_s",
-        "fallbacks",
-        "steps",
-        *WALL_CLOCK_KEYS,
-    )
-    out = {"index": task.index, **{k: summary[k] for k in keys}}
+    out = {"index": task.index, **{k: summary[k] for k in SAMPLE_KEYS}}
     out["passed"] = bool(summary["converged"]) and not bool(summary["collided"])
     out["steerability"] = steerability(scenario)
     return out
@@ -232,19 +233,12 @@ def error_result(task: SampleTask, exc: BaseException) -> dict[str, Any]:
     """A sample that crashed: it fails the check and names the error."""
     return {
         "index": task.index,
+        **dict.fromkeys(SAMPLE_KEYS),
         "outcome": "error",
         "error": f"{type(exc).__name__}: {str(exc)[:200]}",
         "collided": False,
         "converged": False,
-        "min_clearance_m": None,
-        "final_position_error_m": None,
-        "tracking_rmse_m": None,
-        "tracking_rmse_reachable_m": None,
-        "rejoin_time_max_s": None,
-        "time_to_goal_s": None,
-        "fallbacks": None,
         "steps": 0,
-        **dict.fromkeys(WALL_CLOCK_KEYS),
         "passed": False,
     }
 
