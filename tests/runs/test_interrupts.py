@@ -352,4 +352,3 @@ def test_the_reference_is_waited_for_from_leave_s_before_it_is_covered_until_it_
     blockage = ReferenceBlockage(goal, centres, np.array([0.3]), 0.5, tau, leave)
     waiting = [k for k in range(100) if blockage.waiting(k)]
     assert waiting == list(range(21, 58))
-
