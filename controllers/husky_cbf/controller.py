@@ -73,12 +73,14 @@ class HuskyCBFController:
         # guidance's movers as wide as the NMPC's (_obstacles) at the horizon's middle
         plan_s = config.measurement_delay_s + 0.5 * base.horizon * base.tau_s
         growth_s = 0.5 * config.mover_sweep_s + config.mover_margin_per_m * plan_s
-        self._guidance = Guidance(config.guidance, self._disc_radius + config.margin_m, growth_s)
+        self._pipe = CommandPipe(config.response, base.tau_s, config.measurement_delay_s)
+        # and starting where the NMPC's first circle is (_obstacles)
+        lead_s = self._pipe.delay_s + 0.5 * config.mover_sweep_s
+        self._guidance = Guidance(config.guidance, self._disc_radius + config.margin_m, growth_s, lead_s)
         self._approach = LineApproach(config.guidance)
         self._evasion = MoverEvasion(config.guidance, self._disc_radius + config.margin_m)
         self._escape = Escape(config.escape, base.tau_s)
         self._step = extended_step(base.tau_s, config.response)
-        self._pipe = CommandPipe(config.response, base.tau_s, config.measurement_delay_s)
         #: from now to the instant the first command acts (s): the prediction's span less the latency
         self._plan_start_s = max(self._pipe.delay_s - config.sensing_latency_s, 0.0)
         self._pose_filter = PoseFilter(config.pose_noise, base.tau_s)
@@ -162,7 +164,7 @@ class HuskyCBFController:
         if target is not None:
             goal = np.array([target.x_m, target.y_m, target.heading_rad])
         tabu = self._escape.tabu_circles(t)
-        waypoint = self._guidance.waypoint(pose[:2], goal, obstacles, tabu) or target
+        waypoint = self._guidance.waypoint(pose[:2], goal, obstacles, tabu, slow_trajectory) or target
         if waypoint is None:
             return ref_states, ref_controls, False
         target = [waypoint.x_m, waypoint.y_m, waypoint.heading_rad]

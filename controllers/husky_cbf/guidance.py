@@ -45,17 +45,19 @@ def inflated_circles(
     sweep_s: float,
     robot_xy: np.ndarray,
     mover_growth_s: float = 0.0,
+    mover_lead_s: float = 0.0,
 ) -> np.ndarray:
     """(M, 3) circles [x, y, r] (m): obstacles inflated by `inflation_m` (a mover by its speed
-    times mover_growth_s more), movers swept over sweep_s; a circle that holds the robot is shrunk
-    to just exclude it (the robot is where it is)."""
+    times mover_growth_s more), movers swept over sweep_s from where they will be mover_lead_s
+    (s) from now; a circle that holds the robot is shrunk to just exclude it (the robot is where
+    it is)."""
     circles = []
     for ob in obstacles:
         speed = math.hypot(ob.vx_mps, ob.vy_mps)
         radius = ob.radius_m + inflation_m + mover_growth_s * speed
         # a circle every half radius along the track: neighbours overlap, the track is covered
         samples = max(int(math.ceil(speed * sweep_s / (0.5 * radius))) + 1, 1) if speed > 1e-3 else 1
-        for t in np.linspace(0.0, sweep_s if samples > 1 else 0.0, samples):
+        for t in mover_lead_s + np.linspace(0.0, sweep_s if samples > 1 else 0.0, samples):
             circles.append((ob.x_m + ob.vx_mps * t, ob.y_m + ob.vy_mps * t, radius))
     if not circles:
         return np.zeros((0, 3))
@@ -81,13 +83,26 @@ class Guidance:
     """Remembers whether the last step was guided (for the release margin) and the path it took
     (which the next search favours: path_hysteresis)."""
 
-    def __init__(self, config: GuidanceConfig, inflation_m: float, mover_growth_s: float = 0.0) -> None:
+    def __init__(
+        self,
+        config: GuidanceConfig,
+        inflation_m: float,
+        mover_growth_s: float = 0.0,
+        mover_lead_s: float = 0.0,
+    ) -> None:
         self.config = config
         self.inflation_m = inflation_m
         #: a mover's circles grow by its speed times this (s): the NMPC's own mover model is wider
         #: than its track (HuskyCBFConfig.mover_sweep_s, mover_margin_per_m), and a path through a
         #: gap the NMPC holds closed leads the robot into a wait (paper_dynamic_tracking_crossing)
         self.mover_growth_s = mover_growth_s
+        #: and, for a robot waiting on a slow trajectory (`waypoint`'s `behind_movers`), start this
+        #: far (s) along its track, where the NMPC's first circle is: centred on the mover now,
+        #: they held a reference the mover had passed closed for a second longer than the NMPC
+        #: does, and the robot rejoined late (slow_circle_among_movers, check). Not elsewhere:
+        #: routed that close behind movers at 0.8 m/s, the robot collided at N = 5
+        #: (tests/study/scenarios_unseen/crossing_movers_fast)
+        self.mover_lead_s = mover_lead_s
         self.reset()
 
     def reset(self) -> None:
@@ -95,12 +110,18 @@ class Guidance:
         self.path: np.ndarray | None = None  # the last path taken ((K, 2), m)
 
     def circles(
-        self, robot_xy: np.ndarray, obstacles: Sequence[Obstacle], extra: np.ndarray | None = None
+        self,
+        robot_xy: np.ndarray,
+        obstacles: Sequence[Obstacle],
+        extra: np.ndarray | None = None,
+        behind_movers: bool = False,
     ) -> np.ndarray:
         """(M, 3) circles [x, y, r] (m) that guidance avoids: the obstacles inflated and swept
-        (inflated_circles) and `extra` ones (the escape's tabu spots), neither over the robot."""
+        (inflated_circles; movers from mover_lead_s on if `behind_movers`) and `extra` ones (the
+        escape's tabu spots), neither over the robot."""
+        lead_s = self.mover_lead_s if behind_movers else 0.0
         circles = inflated_circles(
-            obstacles, self.inflation_m, self.config.mover_sweep_s, robot_xy, self.mover_growth_s
+            obstacles, self.inflation_m, self.config.mover_sweep_s, robot_xy, self.mover_growth_s, lead_s
         )
         if extra is not None and len(extra):
             extra = np.array(extra, dtype=float).reshape(-1, 3)
@@ -128,12 +149,14 @@ class Guidance:
         goal: np.ndarray,
         obstacles: Sequence[Obstacle],
         extra: np.ndarray | None = None,
+        behind_movers: bool = False,
     ) -> Waypoint | None:
         """A waypoint toward goal [x, y, heading] (m, m, rad) if the straight way is blocked by
-        the obstacles or the `extra` circles [x, y, r] (m)."""
+        the obstacles or the `extra` circles [x, y, r] (m); `behind_movers`: movers as the NMPC
+        sees them ahead (mover_lead_s), for a robot waiting on a slow trajectory."""
         cfg = self.config
         robot_xy = np.asarray(robot_xy, dtype=float)
-        circles = self.circles(robot_xy, obstacles, extra)
+        circles = self.circles(robot_xy, obstacles, extra, behind_movers)
         extra = cfg.release_margin_m if self.guided else 0.0
         if not segment_blocked(robot_xy, goal[:2], circles, extra):
             self.guided, self.path = False, None

@@ -214,6 +214,17 @@ def test_the_way_round_a_static_obstacle_dead_ahead_keeps_its_side_under_noise()
     assert len(set(sides(GuidanceConfig(), vx_mps=-0.3))) == 2  # a mover: no hysteresis
 
 
+def test_a_waiting_robot_sees_a_mover_that_passed_its_reference_as_the_nmpc_does() -> None:
+    """A mover 1 m past the reference, going away at 0.5 m/s: guidance's circles centred on the
+    mover now still cover the reference; for a robot waiting on a slow trajectory they start
+    where the NMPC's first circle is (mover_lead_s ahead) and the way back is clear."""
+    guidance = Guidance(GuidanceConfig(), inflation_m=0.48, mover_growth_s=0.96, mover_lead_s=1.09)
+    mover = [Obstacle(1.0, 0.0, 0.3, vx_mps=0.5)]
+    robot, reference = np.array([0.0, -2.0]), np.array([0.0, 0.0, math.pi / 2])
+    assert guidance.waypoint(robot, reference, mover) is not None  # held closed: a detour
+    assert guidance.waypoint(robot, reference, mover, behind_movers=True) is None  # straight back
+
+
 def test_the_turn_monitor_compares_measured_with_predicted_heading_change() -> None:
     monitor = TurnMonitor(window_steps=8, min_turn_rad=0.3)
     for _ in range(8):
