@@ -74,9 +74,13 @@ class HuskyCBFController:
         plan_s = config.measurement_delay_s + 0.5 * base.horizon * base.tau_s
         growth_s = 0.5 * config.mover_sweep_s + config.mover_margin_per_m * plan_s
         self._pipe = CommandPipe(config.response, base.tau_s, config.measurement_delay_s)
-        # and starting where the NMPC's first circle is (_obstacles)
-        lead_s = self._pipe.delay_s + 0.5 * config.mover_sweep_s
-        self._guidance = Guidance(config.guidance, self._disc_radius + config.margin_m, growth_s, lead_s)
+        #: how far along its track (s) a mover's first NMPC circle is centred (_obstacles): the
+        #: drive's dead time plus half the sweep; guidance's circles start there too, for a robot
+        #: waiting on a slow reference
+        self._mover_lead_s = self._pipe.delay_s + 0.5 * config.mover_sweep_s
+        self._guidance = Guidance(
+            config.guidance, self._disc_radius + config.margin_m, growth_s, self._mover_lead_s
+        )
         self._approach = LineApproach(config.guidance)
         self._evasion = MoverEvasion(config.guidance, self._disc_radius + config.margin_m)
         self._escape = Escape(config.escape, base.tau_s)
@@ -205,11 +209,9 @@ class HuskyCBFController:
                 return state
         return states[0]
 
-    def _obstacles(
-        self, pose: np.ndarray, obstacles: Sequence[Obstacle], delay_s: float
-    ) -> tuple[np.ndarray, np.ndarray]:
+    def _obstacles(self, pose: np.ndarray, obstacles: Sequence[Obstacle]) -> tuple[np.ndarray, np.ndarray]:
         """Centres (slots, N+1, 2) and inflated radii (slots, N+1) (m) at the plan's steps, which
-        start delay_s (s) from now."""
+        start the drive's dead time from now."""
         cfg, base = self.config, self.config.nmpc
         centres, radii = predict_obstacles(
             obstacles, pose[:2], cfg.slots, base.tau_s, base.horizon, base.obstacle_prediction
@@ -220,8 +222,8 @@ class HuskyCBFController:
         velocity = (centres[:, 1, :] - centres[:, 0, :]) / base.tau_s
         speed = np.hypot(velocity[:, 0], velocity[:, 1])
         half_sweep = 0.5 * cfg.mover_sweep_s
-        centres = centres + (delay_s + half_sweep) * velocity[:, None, :]
-        travel = speed[:, None] * (delay_s + base.tau_s * np.arange(base.horizon + 1))
+        centres = centres + self._mover_lead_s * velocity[:, None, :]
+        travel = speed[:, None] * (self._pipe.delay_s + base.tau_s * np.arange(base.horizon + 1))
         inflated = (
             radii[:, None] + cfg.margin_m + half_sweep * speed[:, None] + cfg.mover_margin_per_m * travel
         )
@@ -333,7 +335,7 @@ class HuskyCBFController:
         ref_states, ref_controls, guided = self._reference(
             pose, estimate, float(z0[3]), reference, sampled, stationary, obstacles, t
         )
-        centres, radii = self._obstacles(pose, obstacles, self._pipe.delay_s)
+        centres, radii = self._obstacles(pose, obstacles)
         reversing = self._approach.reversing or self._escape.reversing
         lookahead = cfg.terminal_lookahead_m * (-1.0 if reversing else 1.0)
         caps = self._speed_caps(z0, now, stationary, isinstance(reference, SetPoint), self._evasion.active)
