@@ -125,3 +125,20 @@ def test_a_robot_that_slides_off_the_line_while_settling_pivots_again() -> None:
         approach.pre_goal_done, approach.pivot = True, "settle"
         approach.waypoint(np.array([9.02, lateral, -0.14]), goal, none)
         assert approach.pivot == phase
+
+
+def test_a_settle_still_turning_to_the_goal_heading_is_not_restarted_by_its_own_scrub() -> None:
+    """Mid-turn, 8 cm off the line is the turn's own scrub: the settle goes on (restarted there,
+    the pivot's turns each way scrubbed as much again, cycling 7 to 9 cm from the goal); drifted
+    beyond pivot_restart_m it pivots again whatever its heading."""
+    config = GuidanceConfig()
+    goal, none = np.array([9.0, 0.0, 0.0]), np.zeros((0, 3))
+    for pose, phase in (
+        ((9.02, 0.08, -1.0), "settle"),
+        ((9.02, 0.08, -0.14), "turn"),
+        ((9.0, 0.12, -1.0), "turn"),
+    ):
+        approach = LineApproach(config)
+        approach.pre_goal_done, approach.pivot = True, "settle"
+        approach.waypoint(np.array(pose), goal, none)
+        assert approach.pivot == phase, pose
