@@ -373,9 +373,10 @@ class LineApproach:
             # drifted away, or found off the line once turned to the goal's heading (a skid-steer
             # turning in place scrubs sideways): the NMPC alone then settled 8 cm beside the goal,
             # turned towards the line, short of the heading tolerance (trap_three_cylinders, N = 5).
-            # Not judged mid-turn: the turn's own scrub (5 to 10 cm) then restarted the pivot,
-            # whose 1.5 rad turns each way scrubbed as much again, cycling 7 to 9 cm from the
-            # goal until timeout (paper_point_stabilisation, check seed 3, latency 2 steps)
+            # Not judged mid-turn: the turn's own slip (5 to 10 cm: scrub and the NMPC's shuffle)
+            # then restarted the pivot, whose 1.5 rad turns each way slipped as much again,
+            # cycling 7 to 9 cm from the goal until timeout (paper_point_stabilisation, check
+            # seed 3, latency 2 steps)
             self.pivot = ""
         if self.pivot and distance > self.pivot_radius_m + cfg.pivot_restart_m:
             self.pivot = ""  # taken away (out of a mover's way): judged afresh when back
