@@ -247,7 +247,8 @@ class HuskyCBFConfig:
     #: a stage cost only by backing up and turning).
     terminal_weight: tuple[float, float, float] = setting((20.0, 200.0, 5.0), 0.0, 1e6)
     #: the terminal lateral error is taken this far ahead of the robot (behind it while it backs
-    #: up onto a goal's line), so that turning toward the line pays within a short horizon (m)
+    #: up onto a goal's line; at it while it settles on the goal), so that turning toward the line
+    #: pays within a short horizon (m)
     terminal_lookahead_m: float = setting(0.5, 0.0, 5.0, "m")
     terminal_speed_weight: float = setting(5.0, 0.0, 1e6)  # set-points: arrive at rest ((m/s)^-2 in the cost)
     #: the localisation's reported pose noise: the set-point approach decides on a filtered pose

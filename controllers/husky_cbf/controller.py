@@ -338,6 +338,11 @@ class HuskyCBFController:
         centres, radii = self._obstacles(pose, obstacles)
         reversing = self._approach.reversing or self._escape.reversing
         lookahead = cfg.terminal_lookahead_m * (-1.0 if reversing else 1.0)
+        if self._approach.pivot == "settle":
+            # turning to the goal's heading on the goal: taken ahead, the lateral error pulled the
+            # heading towards the line by lateral / lookahead, and the robot rested 6 cm beside
+            # the goal 0.11 rad off its heading (trap_cup, N = 5, IPOPT)
+            lookahead = 0.0
         caps = self._speed_caps(z0, now, stationary, isinstance(reference, SetPoint), self._evasion.active)
         p = pack_parameters(z0, ref_states, ref_controls, centres, radii, caps, lookahead)
         guess = self._warm_guess(z0)
