@@ -154,7 +154,9 @@ class GuidanceConfig:
     #: Pivot (guidance.LineApproach): within pivot_radius_m of a set-point and off its line, turn
     #: where it stands until aimed at the goal within pivot_aim_rad, drive to within
     #: pivot_arrive_m of it, and turn to its heading there; pivot again if it drifts beyond
-    #: pivot_restart_m (m, rad). Also wherever docking has no room behind the goal.
+    #: pivot_restart_m, or, once turned to within pivot_aim_rad of the goal's heading, is more
+    #: than approach_enter_m off its line (m, rad). Also wherever docking has no room behind the
+    #: goal.
     pivot_radius_m: float = setting(1.0, 0.0, 20.0, "m")
     pivot_aim_rad: float = setting(0.2, 0.0, math.pi, "rad", lo_open=True)
     pivot_arrive_m: float = setting(0.05, 0.0, 2.0, "m", lo_open=True)

@@ -312,6 +312,11 @@ class LineApproach:
         """Whether the robot is meant to move backwards: docking, or a pivot backing onto the goal."""
         return self.docking or (self.pivot in ("turn", "drive") and self.pivot_reverse)
 
+    @property
+    def settling(self) -> bool:
+        """Whether the pivot has brought the robot to the goal and it turns to the goal's heading."""
+        return self.pivot == "settle"
+
     def waypoint(self, pose: np.ndarray, goal: np.ndarray, circles: np.ndarray) -> Waypoint | None:
         """The approach waypoint, or None to go for the goal itself; `circles` are the inflated
         obstacles (inflated_circles)."""
