@@ -338,8 +338,9 @@ class HuskyCBFController:
         centres, radii = self._obstacles(pose, obstacles)
         reversing = self._approach.reversing or self._escape.reversing
         lookahead = cfg.terminal_lookahead_m * (-1.0 if reversing else 1.0)
-        if self._approach.settling:
-            # turning to the goal's heading on the goal: taken ahead, the lateral error pulled the
+        if self._approach.settling and not guided:
+            # turning to the goal's heading on the goal (the NMPC tracks the set-point itself, not
+            # a waypoint of evasion, escape or guidance): taken ahead, the lateral error pulled the
             # heading towards the line by lateral / lookahead, and the robot rested 6 cm beside
             # the goal 0.11 rad off its heading (trap_cup, N = 5, IPOPT)
             lookahead = 0.0
