@@ -128,9 +128,9 @@ def test_a_robot_that_slides_off_the_line_while_settling_pivots_again() -> None:
 
 
 def test_a_settle_still_turning_to_the_goal_heading_is_not_restarted_by_its_own_scrub() -> None:
-    """Mid-turn, 8 cm off the line is the turn's own scrub: the settle goes on (restarted there,
-    the pivot's turns each way scrubbed as much again, cycling 7 to 9 cm from the goal); drifted
-    beyond pivot_restart_m it pivots again whatever its heading."""
+    """Mid-turn, 8 cm off the line is the turn's own slip (scrub and the NMPC's shuffle): the
+    settle goes on (restarted there, the pivot's turns each way slipped as much again, cycling 7
+    to 9 cm from the goal); drifted beyond pivot_restart_m it pivots again whatever its heading."""
     config = GuidanceConfig()
     goal, none = np.array([9.0, 0.0, 0.0]), np.zeros((0, 3))
     for pose, phase in (
