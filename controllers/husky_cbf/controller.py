@@ -153,9 +153,11 @@ class HuskyCBFController:
         )
         # where to go now, in priority: out of a mover's way, out of a deadlock, onto a
         # set-point's line (or at a slow trajectory's point), the goal
-        slow_trajectory = stationary and not isinstance(reference, SetPoint)
-        target = self._evasion.waypoint(pose, 0.0 if slow_trajectory else speed_mps, obstacles)
         set_point = isinstance(reference, SetPoint)
+        slow_trajectory = stationary and not set_point
+        now_state, now_control = ref_states[0], ref_controls[0]
+        meant = self._meant_velocity(pose, speed_mps, set_point, slow_trajectory, now_state, now_control)
+        target = self._evasion.waypoint(pose, meant, obstacles)
         escape = self._escape_waypoint(pose, goal, set_point, target is not None, circles, obstacles, t)
         if escape is not None:
             target = [escape.x_m, escape.y_m, escape.heading_rad]
@@ -173,6 +175,28 @@ class HuskyCBFController:
             return ref_states, ref_controls, False
         target = [waypoint.x_m, waypoint.y_m, waypoint.heading_rad]
         return np.tile(target, (base.horizon + 1, 1)), np.zeros((base.horizon, 2)), True
+
+    @staticmethod
+    def _meant_velocity(
+        pose: np.ndarray,
+        speed_mps: float,
+        set_point: bool,
+        slow_trajectory: bool,
+        reference_state: np.ndarray,
+        reference_control: np.ndarray,
+    ) -> np.ndarray:
+        """The velocity [vx, vy] (m/s) mover evasion judges the robot at: where it means to go,
+        not where evasion itself takes it. On a set-point, its own speed along its heading; on a
+        slow trajectory, 0 (it means to stay: judged against its own flight, a robot reversing
+        ahead of a mover saw no closing track and was chased, in the mover's path, metres from
+        its reference); on a trajectory, the reference's velocity now (judged at its own speed, a
+        robot that started behind its reference saw the crossing mover on course as it drove off
+        and off course once evasion had stopped it, every other step, and stayed in the mover's
+        path: paper_dynamic_tracking_crossing)."""
+        if slow_trajectory:
+            return np.zeros(2)
+        course, speed = (pose[2], speed_mps) if set_point else (reference_state[2], reference_control[0])
+        return float(speed) * np.array([math.cos(course), math.sin(course)])
 
     def _escape_waypoint(
         self,

@@ -441,10 +441,9 @@ class MoverEvasion:
 
     A skid-steer needs a second or two to turn, so a short horizon that first sees a mover when
     its constraint activates can only back away in front of it (and be chased). Here each mover's
-    track relative to the robot moving at `speed_mps` along its heading is extrapolated
-    evade_horizon_s ahead (the controller gives 0 on a slow trajectory, where the robot means to
-    stay: judged against its own flight, a robot reversing ahead of a mover sees no closing track
-    and is chased, in the mover's path, metres from its reference); if its
+    track relative to the robot moving at `velocity_mps` is extrapolated evade_horizon_s ahead:
+    the velocity the robot means to have, which the controller decides
+    (HuskyCBFController._meant_velocity), not the one its own evasion gives it; if its
     closest approach comes within its radius plus the robot's inflation plus evade_margin_m, the
     waypoint is the point that much to the side of the robot (away from the mover's relative
     line; to the robot's left of it when dead ahead), kept until the mover is no longer on
@@ -463,10 +462,14 @@ class MoverEvasion:
         """Whether the last `waypoint` call stepped aside (a mover on a collision course)."""
         return bool(self.side)
 
-    def waypoint(self, pose: np.ndarray, speed_mps: float, obstacles: Sequence[Obstacle]) -> Waypoint | None:
+    def waypoint(
+        self, pose: np.ndarray, velocity_mps: np.ndarray, obstacles: Sequence[Obstacle]
+    ) -> Waypoint | None:
+        """The step aside from the soonest mover on a collision course with the robot at `pose`
+        [x, y, theta] (m, m, rad) moving at `velocity_mps` [vx, vy] (m/s, world frame), or None."""
         cfg = self.config
         robot_xy = np.asarray(pose[:2], dtype=float)
-        robot_v = speed_mps * np.array([math.cos(pose[2]), math.sin(pose[2])])
+        robot_v = np.asarray(velocity_mps, dtype=float)
         threat, soonest = None, math.inf
         for ob in obstacles:
             if math.hypot(ob.vx_mps, ob.vy_mps) <= cfg.static_speed_mps:

@@ -16,6 +16,7 @@ import pytest
 from controllers import Obstacle
 from controllers.husky_cbf import Footprint
 from controllers.husky_cbf.config import GuidanceConfig, RobotResponse
+from controllers.husky_cbf.controller import HuskyCBFController
 from controllers.husky_cbf.delay import CommandPipe
 from controllers.husky_cbf.footprint import disc_cover
 from controllers.husky_cbf.guidance import (
@@ -300,10 +301,37 @@ def test_evasion_judges_a_mover_against_the_robot_where_it_means_to_be() -> None
     evasion = MoverEvasion(GuidanceConfig(), inflation_m=0.48)
     pose = np.array([0.0, 0.0, math.pi])  # facing -x, reversing moves it along +x
     mover = [Obstacle(-1.5, 0.0, 0.3, vx_mps=0.6)]  # 1.5 m behind the robot's path, coming on at 0.6 m/s
-    assert evasion.waypoint(pose, -0.6, mover) is None  # fleeing at 0.6 m/s: never closer
-    step = evasion.waypoint(pose, 0.0, mover)
+    assert evasion.waypoint(pose, np.array([0.6, 0.0]), mover) is None  # fleeing at 0.6 m/s: never closer
+    step = evasion.waypoint(pose, np.zeros(2), mover)
     assert step is not None and evasion.active
     assert abs(step.x_m) < 1e-9 and abs(step.y_m) >= 0.3 + 0.48 + GuidanceConfig().evade_margin_m - 1e-9
+
+
+def test_evasion_on_a_trajectory_does_not_switch_with_the_robot_s_own_speed() -> None:
+    """paper_dynamic_tracking_crossing's start: the robot stands 0.9 m behind its reference (0.23 m/s
+    north) with a mover crossing from the north-west at 0.4 m/s. Judged at its own speed, the mover
+    is off course while the robot stands and on course once it drives off at 0.3 m/s, so evasion
+    switched on and off as it stopped and started. Judged at the reference's velocity, the step
+    aside is the same at either speed."""
+    pose = np.array([2.35, -0.84, 1.58])
+    mover = [Obstacle(0.52, 1.44, 0.3, vx_mps=0.4 * math.cos(-1.0), vy_mps=0.4 * math.sin(-1.0))]
+    reference_state, reference_control = np.array([2.30, 0.08, math.pi / 2 + 0.035]), np.array([0.23, 0.1])
+    heading = np.array([math.cos(pose[2]), math.sin(pose[2])])
+    assert MoverEvasion(GuidanceConfig(), 0.48).waypoint(pose, 0.0 * heading, mover) is None
+    assert MoverEvasion(GuidanceConfig(), 0.48).waypoint(pose, 0.3 * heading, mover) is not None
+    meant_velocity = HuskyCBFController._meant_velocity
+    steps = []
+    for speed in (0.0, 0.3):
+        meant = meant_velocity(pose, speed, False, False, reference_state, reference_control)
+        step = MoverEvasion(GuidanceConfig(), 0.48).waypoint(pose, meant, mover)
+        assert step is not None
+        steps.append((step.x_m, step.y_m))
+    assert steps[0] == steps[1]
+    # a set-point is still judged at the robot's own speed, a slow trajectory standing
+    set_point = meant_velocity(pose, 0.3, True, False, reference_state, reference_control)
+    assert np.allclose(set_point, 0.3 * heading)
+    slow = meant_velocity(pose, 0.3, False, True, reference_state, reference_control)
+    assert np.allclose(slow, 0.0)
 
 
 def _pipe(delay_s: float, tau_s: float = 0.2) -> CommandPipe:
