@@ -9,7 +9,8 @@ Per control step:
 2. the reference: the paper's, unless guidance (guidance.py) gives a waypoint: out of the way of a
    mover on a collision course, out of a deadlock (escape.py: the robot made no progress towards
    its target), onto a set-point's line near the goal (straight at the point of a slow
-   trajectory), or along a shortest path when the straight way is blocked;
+   trajectory, or beside it while a mover is on course to it), or along a shortest path when
+   the straight way is blocked;
 3. the nearest obstacles predicted at constant velocity, each inflated by the margin; a mover
    covers its next mover_sweep_s of travel at every step, with a margin growing with that travel;
 4. the hard OCP (ocp.py); if IPOPT fails, the same OCP with an exactly penalised obstacle slack
@@ -83,6 +84,7 @@ class HuskyCBFController:
         )
         self._approach = LineApproach(config.guidance)
         self._evasion = MoverEvasion(config.guidance, self._disc_radius + config.margin_m)
+        self._waiting = MoverEvasion(config.guidance, self._disc_radius + config.margin_m)
         self._escape = Escape(config.escape, base.tau_s)
         self._step = extended_step(base.tau_s, config.response)
         #: from now to the instant the first command acts (s): the prediction's span less the latency
@@ -109,6 +111,7 @@ class HuskyCBFController:
         self._guidance.reset()
         self._approach.reset()
         self._evasion.reset()
+        self._waiting.reset()
         self._escape.reset()
         self._pose_filter.reset()
         self._turns.reset()
@@ -158,13 +161,20 @@ class HuskyCBFController:
         now_state, now_control = ref_states[0], ref_controls[0]
         meant = self._meant_velocity(pose, speed_mps, set_point, slow_trajectory, now_state, now_control)
         target = self._evasion.waypoint(pose, meant, obstacles)
+        if target is not None or not slow_trajectory:
+            self._waiting.reset()
         escape = self._escape_waypoint(pose, goal, set_point, target is not None, circles, obstacles, t)
         if escape is not None:
             target = [escape.x_m, escape.y_m, escape.heading_rad]
             return np.tile(target, (base.horizon + 1, 1)), np.zeros((base.horizon, 2)), True
         if target is None and slow_trajectory:
             g = cfg.guidance
+            spot = self._waiting_spot(pose, goal, obstacles)
+            if spot is not None:
+                goal = np.array([spot.x_m, spot.y_m, goal[2]])
             target = point_approach(pose, goal, g.point_approach_near_m, g.point_approach_far_m)
+            if target is None and spot is not None:
+                target = Waypoint(spot.x_m, spot.y_m, float(pose[2]), np.array([pose[:2], goal[:2]]))
         elif target is None and stationary:
             target = self._approach.waypoint(estimate, goal, circles)
         if target is not None:
@@ -197,6 +207,26 @@ class HuskyCBFController:
             return np.zeros(2)
         course, speed = (pose[2], speed_mps) if set_point else (reference_state[2], reference_control[0])
         return float(speed) * np.array([math.cos(course), math.sin(course)])
+
+    def _waiting_spot(
+        self, pose: np.ndarray, goal: np.ndarray, obstacles: Sequence[Obstacle]
+    ) -> Waypoint | None:
+        """Where a robot on its way back to a slow trajectory's point `goal` (x m, y m, heading
+        rad) goes instead while a mover is on course to the point: where it would step aside to
+        from the point (MoverEvasion), on its own side of the mover's line; None when no mover
+        reaches the point before the robot would (at approach_speed_mps) or the robot is at it.
+        Driving at the point, it met the mover on its line and was chased metres away by it
+        (slow_circle_among_movers, check: rejoins of 13 to 21 s)."""
+        g = self.config.guidance
+        distance = math.hypot(goal[0] - pose[0], goal[1] - pose[1])
+        if distance <= g.point_approach_far_m:
+            self._waiting.reset()
+            return None
+        spot = self._waiting.waypoint(np.asarray(goal, dtype=float), np.zeros(2), obstacles, side_of=pose[:2])
+        if spot is not None and self._waiting.soonest_s < distance / g.approach_speed_mps:
+            self._waiting.reset()  # the mover passes the point before the robot gets there
+            return None
+        return spot
 
     def _escape_waypoint(
         self,

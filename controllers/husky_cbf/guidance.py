@@ -453,6 +453,7 @@ class MoverEvasion:
         self.config = config
         self.inflation_m = inflation_m
         self.side = 0.0  # the side taken (+1 left of the mover's relative track, -1 right)
+        self.soonest_s = math.inf
 
     def reset(self) -> None:
         self.side = 0.0
@@ -463,10 +464,15 @@ class MoverEvasion:
         return bool(self.side)
 
     def waypoint(
-        self, pose: np.ndarray, velocity_mps: np.ndarray, obstacles: Sequence[Obstacle]
+        self,
+        pose: np.ndarray,
+        velocity_mps: np.ndarray,
+        obstacles: Sequence[Obstacle],
+        side_of: np.ndarray | None = None,
     ) -> Waypoint | None:
         """The step aside from the soonest mover on a collision course with the robot at `pose`
-        [x, y, theta] (m, m, rad) moving at `velocity_mps` [vx, vy] (m/s, world frame), or None."""
+        [x, y, theta] (m, m, rad) moving at `velocity_mps` [vx, vy] (m/s, world frame), or None;
+        to the side of the mover's line that the point `side_of` [x, y] (m) is on, if given."""
         cfg = self.config
         robot_xy = np.asarray(pose[:2], dtype=float)
         robot_v = np.asarray(velocity_mps, dtype=float)
@@ -484,6 +490,7 @@ class MoverEvasion:
             needed = ob.radius_m + self.inflation_m + cfg.evade_margin_m
             if np.hypot(*closest) < needed and t_c < soonest:
                 threat, soonest = (closest, rel_v, needed), t_c
+        self.soonest_s = soonest  # the threat's time to its closest approach (s); inf: none
         if threat is None:
             self.side = 0.0
             return None
@@ -491,6 +498,8 @@ class MoverEvasion:
         normal = np.array([-rel_v[1], rel_v[0]]) / np.hypot(*rel_v)  # left of the relative track
         if not self.side:
             offset = float(closest @ normal)  # > 0: the mover passes left of the robot
+            if side_of is not None:  # ... left of `side_of`
+                offset -= float((np.asarray(side_of, dtype=float) - robot_xy) @ normal)
             # step to the other side (left if dead ahead)
             self.side = -1.0 if offset > cfg.evade_dead_ahead_m else 1.0
         shift = needed + self.side * float(closest @ normal)  # to `needed` beyond the mover's line

@@ -334,6 +334,41 @@ def test_evasion_on_a_trajectory_does_not_switch_with_the_robot_s_own_speed() ->
     assert np.allclose(slow, 0.0)
 
 
+def test_evasion_steps_to_the_side_of_the_mover_s_line_a_given_point_is_on() -> None:
+    """A mover heading north-east through (0.6, 0.8): the step aside from that point goes to the
+    side of the mover's line that `side_of` is on, whichever that is, to the same distance."""
+    point = np.array([0.6, 0.8, 0.0])
+    mover = [Obstacle(-0.9, -0.7, 0.3, vx_mps=0.45 / math.sqrt(2), vy_mps=0.45 / math.sqrt(2))]
+    needed = 0.3 + 0.48 + GuidanceConfig().evade_margin_m
+    for side_of, sign in ((np.array([2.4, 0.1]), 1.0), (np.array([-0.5, 2.0]), -1.0)):
+        step = MoverEvasion(GuidanceConfig(), 0.48).waypoint(point, np.zeros(2), mover, side_of=side_of)
+        assert step is not None
+        across = (step.x_m - step.y_m) - (point[0] - point[1])  # > 0: south-east of the line
+        assert across * sign > 0 and abs(across) / math.sqrt(2) == pytest.approx(needed)
+
+
+def test_a_robot_on_its_way_back_to_a_slow_reference_waits_beside_it_for_a_mover() -> None:
+    """slow_circle_among_movers: 1.9 m from its reference point, the robot drove at it as a mover
+    headed for it and was chased. It goes where it would step aside to from the point, on its own
+    side of the mover's line; not if the mover passes the point before the robot could get there
+    (it follows behind), and not once it is at the point (evasion proper)."""
+    path = next(p for p in shipped_scenarios() if p.stem == "slow_circle_among_movers")
+    controller = load_scenario(path).make_controller("husky-cbf")
+    goal = np.array([0.6, 0.8, 2.6])
+    pose = np.array([2.38, 0.07, 2.4])  # south-east of the mover's line, 1.9 m from the point
+    diagonal = np.array([1.0, 1.0]) / math.sqrt(2)
+
+    def mover(seconds_to_point: float) -> list[Obstacle]:
+        x, y = goal[:2] - 0.45 * seconds_to_point * diagonal
+        return [Obstacle(x, y, 0.3, vx_mps=0.45 * diagonal[0], vy_mps=0.45 * diagonal[1])]
+
+    spot = controller._waiting_spot(pose, goal, mover(5.0))  # 1.9 m at 0.6 m/s: 3.2 s
+    assert spot is not None and (spot.x_m - spot.y_m) > (goal[0] - goal[1]) + 1.0
+    assert controller._waiting_spot(pose, goal, mover(2.0)) is None  # gone by the time it arrives
+    at_point = np.array([0.75, 0.8, 2.6])
+    assert controller._waiting_spot(at_point, goal, mover(5.0)) is None
+
+
 def _pipe(delay_s: float, tau_s: float = 0.2) -> CommandPipe:
     response = RobotResponse(
         1.0,
