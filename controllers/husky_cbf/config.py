@@ -171,6 +171,11 @@ class GuidanceConfig:
     approach_max_reference_speed_mps: float = setting(0.1, 0.0, 5.0, "m/s", lo_open=True)
     point_approach_near_m: float = setting(0.1, 0.0, 5.0, "m", lo_open=True)
     point_approach_far_m: float = setting(0.3, 0.0, 10.0, "m", lo_open=True)
+    #: a robot at a slow trajectory's point turns its axis across the track of a mover on course
+    #: to the point this long (s) before the mover's closest approach, so that its step aside
+    #: (evasion, evade_horizon_s) is a drive along its axis; 4 s more than evasion's: a quarter
+    #: turn in place takes an unloaded Husky about 1.6 s (1 rad/s), a loaded one longer
+    brace_horizon_s: float = setting(10.0, 0.0, 30.0, "s")
 
     def __post_init__(self) -> None:
         check_ranges(self, "guidance.")

@@ -24,6 +24,7 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Sequence
+from dataclasses import replace
 
 import numpy as np
 
@@ -85,6 +86,7 @@ class HuskyCBFController:
         self._approach = LineApproach(config.guidance)
         self._evasion = MoverEvasion(config.guidance, self._disc_radius + config.margin_m)
         self._waiting = MoverEvasion(config.guidance, self._disc_radius + config.margin_m)
+        self._bracing = MoverEvasion(config.guidance, self._disc_radius + config.margin_m)
         self._escape = Escape(config.escape, base.tau_s)
         self._step = extended_step(base.tau_s, config.response)
         #: from now to the instant the first command acts (s): the prediction's span less the latency
@@ -112,6 +114,7 @@ class HuskyCBFController:
         self._approach.reset()
         self._evasion.reset()
         self._waiting.reset()
+        self._bracing.reset()
         self._escape.reset()
         self._pose_filter.reset()
         self._turns.reset()
@@ -175,12 +178,21 @@ class HuskyCBFController:
             target = point_approach(pose, goal, g.point_approach_near_m, g.point_approach_far_m)
             if target is None and spot is not None:
                 target = Waypoint(spot.x_m, spot.y_m, float(pose[2]), np.array([pose[:2], goal[:2]]))
+            across = None if spot is not None else self._heading_across(pose, goal, obstacles)
+            if across is not None:
+                target = Waypoint(float(goal[0]), float(goal[1]), across, np.array([pose[:2], goal[:2]]))
         elif target is None and stationary:
             target = self._approach.waypoint(estimate, goal, circles)
         if target is not None:
             goal = np.array([target.x_m, target.y_m, target.heading_rad])
         tabu = self._escape.tabu_circles(t)
-        waypoint = self._guidance.waypoint(pose[:2], goal, obstacles, tabu, slow_trajectory) or target
+        waypoint = self._guidance.waypoint(pose[:2], goal, obstacles, tabu, slow_trajectory)
+        if waypoint is not None and self._evasion.active:
+            # stepping aside round an obstacle: the way round, backwards if that turns less. Its
+            # forward heading turned a robot facing away from the way round through the mover's
+            # track, to face the mover, which then chased it (slow_circle_among_movers, check)
+            waypoint = replace(waypoint, heading_rad=_nearer_way(waypoint.heading_rad, pose[2]))
+        waypoint = waypoint or target
         if waypoint is None:
             return ref_states, ref_controls, False
         target = [waypoint.x_m, waypoint.y_m, waypoint.heading_rad]
@@ -227,6 +239,23 @@ class HuskyCBFController:
             self._waiting.reset()  # the mover passes the point before the robot gets there
             return None
         return spot
+
+    def _heading_across(
+        self, pose: np.ndarray, goal: np.ndarray, obstacles: Sequence[Obstacle]
+    ) -> float | None:
+        """The heading (rad) across the track of a mover on course to a slow trajectory's point
+        `goal` within brace_horizon_s, whichever way turns the robot at `pose` less; None when
+        none is, or the robot is not at the point (beyond point_approach_far_m)."""
+        g = self.config.guidance
+        if math.hypot(goal[0] - pose[0], goal[1] - pose[1]) > g.point_approach_far_m:
+            self._bracing.reset()
+            return None
+        step = self._bracing.waypoint(
+            np.asarray(goal, dtype=float), np.zeros(2), obstacles, horizon_s=g.brace_horizon_s
+        )
+        if step is None:
+            return None
+        return _nearer_way(step.heading_rad, pose[2])
 
     def _escape_waypoint(
         self,
@@ -490,3 +519,11 @@ class HuskyCBFController:
         result.solver_fallback = "; ".join(dict.fromkeys(self._solver_fallbacks))
         result.escape = self._escape.phase
         return result
+
+
+def _nearer_way(heading_rad: float, theta_rad: float) -> float:
+    """`heading_rad` or its opposite, whichever is nearer to the robot's heading `theta_rad` (rad):
+    the same axis, driven forwards or backwards."""
+    if math.cos(heading_rad - theta_rad) < 0.0:
+        heading_rad += math.pi
+    return float(math.remainder(heading_rad, 2 * math.pi))

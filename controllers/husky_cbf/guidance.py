@@ -469,11 +469,14 @@ class MoverEvasion:
         velocity_mps: np.ndarray,
         obstacles: Sequence[Obstacle],
         side_of: np.ndarray | None = None,
+        horizon_s: float | None = None,
     ) -> Waypoint | None:
         """The step aside from the soonest mover on a collision course with the robot at `pose`
         [x, y, theta] (m, m, rad) moving at `velocity_mps` [vx, vy] (m/s, world frame), or None;
-        to the side of the mover's line that the point `side_of` [x, y] (m) is on, if given."""
+        to the side of the mover's line that the point `side_of` [x, y] (m) is on, if given;
+        movers are judged over `horizon_s` (s; default evade_horizon_s)."""
         cfg = self.config
+        horizon_s = cfg.evade_horizon_s if horizon_s is None else horizon_s
         robot_xy = np.asarray(pose[:2], dtype=float)
         robot_v = np.asarray(velocity_mps, dtype=float)
         threat, soonest = None, math.inf
@@ -484,7 +487,7 @@ class MoverEvasion:
             rel_v = np.array([ob.vx_mps, ob.vy_mps]) - robot_v
             vv = float(rel_v @ rel_v)
             t_c = -float(rel_p @ rel_v) / vv if vv > 1e-9 else 0.0
-            if not 0.0 < t_c < cfg.evade_horizon_s:
+            if not 0.0 < t_c < horizon_s:
                 continue
             closest = rel_p + t_c * rel_v
             needed = ob.radius_m + self.inflation_m + cfg.evade_margin_m

@@ -369,6 +369,67 @@ def test_a_robot_on_its_way_back_to_a_slow_reference_waits_beside_it_for_a_mover
     assert controller._waiting_spot(at_point, goal, mover(5.0)) is None
 
 
+def test_a_robot_at_a_slow_reference_turns_across_an_oncoming_mover_s_track() -> None:
+    """slow_circle_among_movers: facing along a mover's track when evasion fired, the robot could
+    only back away along it and was chased metres off its reference. At its point, with a mover
+    on course to it within brace_horizon_s, it turns its axis across the mover's track (the way
+    that turns less); not for a mover farther off in time, nor away from the point."""
+    path = next(p for p in shipped_scenarios() if p.stem == "slow_circle_among_movers")
+    scenario = load_scenario(path)
+    controller = scenario.make_controller("husky-cbf")
+    horizon_s = controller.config.guidance.brace_horizon_s
+    goal = np.array([0.9, 0.45, 2.1])
+
+    def mover(seconds_to_point: float) -> list[Obstacle]:  # walking south at 0.35 m/s
+        return [Obstacle(1.0, goal[1] + 0.35 * seconds_to_point, 0.35, vx_mps=0.0, vy_mps=-0.35)]
+
+    facing_north_west = np.array([0.88, 0.48, 2.16])
+    across = controller._heading_across(facing_north_west, goal, mover(0.8 * horizon_s))
+    assert across is not None and abs(math.cos(across)) == pytest.approx(1.0)  # east-west axis
+    assert math.cos(across - facing_north_west[2]) > 0.0  # the nearer way: west, forwards
+    facing_south_east = np.array([0.88, 0.48, -0.9])
+    across = controller._heading_across(facing_south_east, goal, mover(0.8 * horizon_s))
+    assert across is not None and math.cos(across) == pytest.approx(1.0)  # east
+    controller.reset()
+    assert controller._heading_across(facing_north_west, goal, mover(1.2 * horizon_s)) is None
+    away = np.array([2.0, 0.45, 2.16])  # 1.1 m from the point: on its way back, not braced
+    assert controller._heading_across(away, goal, mover(0.8 * horizon_s)) is None
+    # in the loop: the reference's point with the mover still beyond evasion's horizon
+    controller.reset()
+    reference, tau_s, n = scenario.reference_object(), controller.tau_s, controller.config.nmpc.horizon
+    t = 18.0
+    sampled = reference.sample(t, tau_s, n)
+    at_point = np.array([*sampled[0][0][:2], 2.16])
+    evade_s = controller.config.guidance.evade_horizon_s
+    obstacles = [Obstacle(at_point[0] + 0.1, at_point[1] + 0.35 * (evade_s + 1.0), 0.35, vy_mps=-0.35)]
+    states, _, guided = controller._reference(at_point, at_point, 0.0, reference, sampled, True, obstacles, t)
+    assert guided and not controller._evasion.active
+    assert states[-1][:2] == pytest.approx(sampled[0][0][:2], abs=0.05)  # stays at its point
+    assert math.cos(states[-1][2]) == pytest.approx(-1.0)  # facing west, across the track
+
+
+def test_a_robot_stepping_aside_round_an_obstacle_backs_along_the_way_round_if_that_turns_less() -> None:
+    """slow_circle_among_movers: braced facing east, the robot was to step west out of a mover's
+    way; guidance's way round pointed north-west, and the NMPC turned the robot through north, to
+    face the mover, and was chased. Stepping aside, the way round (here round a post west of the
+    robot) is taken backwards when that turns less."""
+    path = next(p for p in shipped_scenarios() if p.stem == "slow_circle_among_movers")
+    scenario = load_scenario(path)
+    controller = scenario.make_controller("husky-cbf")
+    reference, tau_s, n = scenario.reference_object(), controller.tau_s, controller.config.nmpc.horizon
+    t = 18.8
+    pose = np.array([0.92, 0.40, 0.0])  # at its point, facing east
+    post = Obstacle(0.0, 0.40, 0.15)
+    obstacles = [Obstacle(2.0, -1.0, 0.4), post, Obstacle(1.0, 2.3, 0.35, vx_mps=0.0, vy_mps=-0.37)]
+    states, _, guided = controller._reference(
+        pose, pose, 0.0, reference, reference.sample(t, tau_s, n), True, obstacles, t
+    )
+    assert guided and controller._evasion.active and controller._guidance.guided
+    x, y, heading = states[-1]
+    assert x < pose[0] - 0.3 and abs(y - post.y_m) > 0.1  # west, round the post
+    assert math.cos(heading - pose[2]) > 0.0  # facing east still: backing, not turning round
+
+
 def _pipe(delay_s: float, tau_s: float = 0.2) -> CommandPipe:
     response = RobotResponse(
         1.0,
