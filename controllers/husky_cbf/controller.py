@@ -9,8 +9,9 @@ Per control step:
 2. the reference: the paper's, unless guidance (guidance.py) gives a waypoint: out of the way of a
    mover on a collision course, out of a deadlock (escape.py: the robot made no progress towards
    its target), onto a set-point's line near the goal (straight at the point of a slow
-   trajectory, or beside it while a mover is on course to it), or along a shortest path when
-   the straight way is blocked;
+   trajectory, or beside it while a mover is on course to it; at the point, facing across the
+   track of a mover on course to it), or along a shortest path when the straight way is blocked
+   (backwards, while stepping aside, if that turns less);
 3. the nearest obstacles predicted at constant velocity, each inflated by the margin; a mover
    covers its next mover_sweep_s of travel at every step, with a margin growing with that travel;
 4. the hard OCP (ocp.py); if IPOPT fails, the same OCP with an exactly penalised obstacle slack
