@@ -116,8 +116,8 @@ class GuidanceConfig:
     path_hysteresis: float = setting(0.2, 0.0, 0.99)
     path_hysteresis_width_m: float = setting(0.2, 0.0, 2.0, "m")
     #: Mover evasion (guidance.MoverEvasion): a mover whose track relative to the robot comes
-    #: within its radius + the robot's inflation + evade_margin_m in the next evade_horizon_s
-    #: makes the robot step aside now
+    #: within its radius + the robot's inflation + evade_margin_m (or + the NMPC's sweep of that
+    #: mover + release_margin_m, if more) in the next evade_horizon_s makes the robot step aside now
     evade_horizon_s: float = setting(6.0, 0.0, 30.0, "s")
     evade_margin_m: float = setting(0.5, 0.0, 5.0, "m")
     #: a mover passing within this of dead ahead (m) is stepped round on the robot's left: a

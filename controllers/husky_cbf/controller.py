@@ -40,6 +40,7 @@ from controllers.husky_cbf.guidance import (
     MoverEvasion,
     Waypoint,
     inflated_circles,
+    nearer_way,
     point_approach,
 )
 from controllers.husky_cbf.localisation import PoseFilter
@@ -73,7 +74,7 @@ class HuskyCBFController:
         self._soft_problem, self._soft = solver_for(config, base.horizon, config.slots, soft=True)
         self._solver_fallbacks: list[str] = []  # this step's reasons the structured solver failed
         self._discs, self._disc_radius = disc_cover(config.footprint, config.disc_excess_m)
-        # guidance's movers as wide as the NMPC's (_obstacles) at the horizon's middle
+        # guidance's and evasion's movers as wide as the NMPC's (_obstacles) at the horizon's middle
         plan_s = config.measurement_delay_s + 0.5 * base.horizon * base.tau_s
         growth_s = 0.5 * config.mover_sweep_s + config.mover_margin_per_m * plan_s
         self._pipe = CommandPipe(config.response, base.tau_s, config.measurement_delay_s)
@@ -81,13 +82,13 @@ class HuskyCBFController:
         #: drive's dead time plus half the sweep; guidance's circles start there too, for a robot
         #: waiting on a slow reference
         self._mover_lead_s = self._pipe.delay_s + 0.5 * config.mover_sweep_s
-        self._guidance = Guidance(
-            config.guidance, self._disc_radius + config.margin_m, growth_s, self._mover_lead_s
-        )
+        inflation_m = self._disc_radius + config.margin_m
+        self._guidance = Guidance(config.guidance, inflation_m, growth_s, self._mover_lead_s)
         self._approach = LineApproach(config.guidance)
-        self._evasion = MoverEvasion(config.guidance, self._disc_radius + config.margin_m)
-        self._waiting = MoverEvasion(config.guidance, self._disc_radius + config.margin_m)
-        self._bracing = MoverEvasion(config.guidance, self._disc_radius + config.margin_m)
+        # stepping aside from the robot; the waiting spot and the turn across a track, from its point
+        self._evasion, self._waiting, self._bracing = (
+            MoverEvasion(config.guidance, inflation_m, growth_s) for _ in range(3)
+        )
         self._escape = Escape(config.escape, base.tau_s)
         self._step = extended_step(base.tau_s, config.response)
         #: from now to the instant the first command acts (s): the prediction's span less the latency
@@ -192,7 +193,7 @@ class HuskyCBFController:
             # stepping aside round an obstacle: the way round, backwards if that turns less. Its
             # forward heading turned a robot facing away from the way round through the mover's
             # track, to face the mover, which then chased it (slow_circle_among_movers, check)
-            waypoint = replace(waypoint, heading_rad=_nearer_way(waypoint.heading_rad, pose[2]))
+            waypoint = replace(waypoint, heading_rad=nearer_way(waypoint.heading_rad, pose[2]))
         waypoint = waypoint or target
         if waypoint is None:
             return ref_states, ref_controls, False
@@ -256,7 +257,7 @@ class HuskyCBFController:
         )
         if step is None:
             return None
-        return _nearer_way(step.heading_rad, pose[2])
+        return nearer_way(step.heading_rad, pose[2])
 
     def _escape_waypoint(
         self,
@@ -520,11 +521,3 @@ class HuskyCBFController:
         result.solver_fallback = "; ".join(dict.fromkeys(self._solver_fallbacks))
         result.escape = self._escape.phase
         return result
-
-
-def _nearer_way(heading_rad: float, theta_rad: float) -> float:
-    """`heading_rad` or its opposite, whichever is nearer to the robot's heading `theta_rad` (rad):
-    the same axis, driven forwards or backwards."""
-    if math.cos(heading_rad - theta_rad) < 0.0:
-        heading_rad += math.pi
-    return float(math.remainder(heading_rad, 2 * math.pi))

@@ -419,6 +419,14 @@ class LineApproach:
         return None
 
 
+def nearer_way(heading_rad: float, theta_rad: float) -> float:
+    """`heading_rad` or its opposite, whichever is nearer to the robot's heading `theta_rad` (rad),
+    in (-pi, pi]: the same axis, driven forwards or backwards."""
+    if math.cos(heading_rad - theta_rad) < 0.0:
+        heading_rad += math.pi
+    return float(math.remainder(heading_rad, 2 * math.pi))
+
+
 def point_approach(pose: np.ndarray, goal: np.ndarray, near_m: float, far_m: float) -> Waypoint | None:
     """The approach to a slow trajectory's `goal` (x m, y m, heading rad): None (track the
     reference) within near_m of it; else the goal point, approached along the bearing from the
@@ -444,14 +452,18 @@ class MoverEvasion:
     track relative to the robot moving at `velocity_mps` is extrapolated evade_horizon_s ahead:
     the velocity the robot means to have, which the controller decides
     (HuskyCBFController._meant_velocity), not the one its own evasion gives it; if its
-    closest approach comes within its radius plus the robot's inflation plus evade_margin_m, the
-    waypoint is the point that much to the side of the robot (away from the mover's relative
-    line; to the robot's left of it when dead ahead), kept until the mover is no longer on
-    course. The NMPC's obstacle constraints stay in force throughout."""
+    closest approach comes within its radius plus the robot's inflation plus evade_margin_m (or
+    plus the NMPC's sweep of that mover and release_margin_m, if that is more), the waypoint is
+    the point that much to the side of the robot (away from the mover's relative line; to the
+    robot's left of it when dead ahead), kept until the mover is no longer on course. The NMPC's
+    obstacle constraints stay in force throughout."""
 
-    def __init__(self, config: GuidanceConfig, inflation_m: float) -> None:
+    def __init__(self, config: GuidanceConfig, inflation_m: float, mover_growth_s: float = 0.0) -> None:
         self.config = config
         self.inflation_m = inflation_m
+        #: how far (m) the NMPC widens a mover per m/s of its speed (its sweep and travel margin,
+        #: HuskyCBFController._obstacles, at the horizon's middle); 0: the mover's body only
+        self.mover_growth_s = mover_growth_s
         self.side = 0.0  # the side taken (+1 left of the mover's relative track, -1 right)
         self.soonest_s = math.inf
 
@@ -490,7 +502,11 @@ class MoverEvasion:
             if not 0.0 < t_c < horizon_s:
                 continue
             closest = rel_p + t_c * rel_v
-            needed = ob.radius_m + self.inflation_m + cfg.evade_margin_m
+            # at least as wide as the NMPC sees the mover: a fast one's sweep held a robot beside
+            # its track, off evasion's threshold, and it backed away along the track, chased
+            # (paper_dynamic_tracking, check: a 0.7 m/s mover)
+            swept = self.mover_growth_s * math.hypot(ob.vx_mps, ob.vy_mps) + cfg.release_margin_m
+            needed = ob.radius_m + self.inflation_m + max(cfg.evade_margin_m, swept)
             if np.hypot(*closest) < needed and t_c < soonest:
                 threat, soonest = (closest, rel_v, needed), t_c
         self.soonest_s = soonest  # the threat's time to its closest approach (s); inf: none
@@ -508,7 +524,5 @@ class MoverEvasion:
         shift = needed + self.side * float(closest @ normal)  # to `needed` beyond the mover's line
         step = self.side * normal * max(shift, 0.0)
         target = robot_xy + step
-        heading = math.atan2(step[1], step[0])
-        if math.cos(heading - pose[2]) < 0.0:  # reversing there turns less than driving forward
-            heading += math.pi
+        heading = nearer_way(math.atan2(step[1], step[0]), pose[2])  # reversing there if that turns less
         return Waypoint(float(target[0]), float(target[1]), heading, np.array([robot_xy, target]))
