@@ -493,7 +493,8 @@ class MoverEvasion:
         robot_v = np.asarray(velocity_mps, dtype=float)
         threat, soonest = None, math.inf
         for ob in obstacles:
-            if math.hypot(ob.vx_mps, ob.vy_mps) <= cfg.static_speed_mps:
+            speed = math.hypot(ob.vx_mps, ob.vy_mps)
+            if speed <= cfg.static_speed_mps:
                 continue
             rel_p = np.array([ob.x_m, ob.y_m]) - robot_xy
             rel_v = np.array([ob.vx_mps, ob.vy_mps]) - robot_v
@@ -505,7 +506,7 @@ class MoverEvasion:
             # at least as wide as the NMPC sees the mover: a fast one's sweep held a robot beside
             # its track, off evasion's threshold, and it backed away along the track, chased
             # (paper_dynamic_tracking, check: a 0.7 m/s mover)
-            swept = self.mover_growth_s * math.hypot(ob.vx_mps, ob.vy_mps) + cfg.release_margin_m
+            swept = self.mover_growth_s * speed + cfg.release_margin_m
             needed = ob.radius_m + self.inflation_m + max(cfg.evade_margin_m, swept)
             if np.hypot(*closest) < needed and t_c < soonest:
                 threat, soonest = (closest, rel_v, needed), t_c
