@@ -115,6 +115,10 @@ class GuidanceConfig:
     #: robot keep to it and touch the mover (paper_dynamic_tracking_crossing, N = 5)
     path_hysteresis: float = setting(0.2, 0.0, 0.99)
     path_hysteresis_width_m: float = setting(0.2, 0.0, 2.0, "m")
+    #: a way round movers longer than the way round the static obstacles alone is taken only if
+    #: the movers clear the shorter way no sooner than its extra length takes at this speed (m/s):
+    #: a Husky's cruise, with its turns (guidance.Guidance._wait_for_movers)
+    detour_speed_mps: float = setting(0.6, 0.0, 5.0, "m/s", lo_open=True)
     #: Mover evasion (guidance.MoverEvasion): a mover whose track relative to the robot comes
     #: within its radius + the robot's inflation + evade_margin_m (or + the NMPC's sweep of that
     #: mover + release_margin_m, if more) in the next evade_horizon_s makes the robot step aside now
@@ -211,10 +215,11 @@ class EscapeConfig:
     tabu_radius_m: float = setting(0.5, 0.0, 5.0, "m")
     tabu_s: float = setting(20.0, 0.0, 600.0, "s", lo_open=True)
     enabled: bool = True
-    #: on trajectories too? No: a tracking robot's progress is its reference's, and one that waits
-    #: while its reference passes through an obstacle is not stalled. Tried on the crossing movers
-    #: (paper_dynamic_tracking_crossing, N = 5): backing out of the wait, the robot met a mover
-    on_trajectories: bool = False
+    #: on trajectories too (never on a slow one, whose robot waits for movers on purpose): a robot
+    #: that stood 8 s beside a cylinder, unable to swing round to its reference, tracked again
+    #: once the escape took it forward to room to turn (paper_dynamic_tracking_crossing, check).
+    #: Its target is the tracking goal, which is past any obstacle the reference runs through
+    on_trajectories: bool = True
 
     def __post_init__(self) -> None:
         check_ranges(self, "escape.")

@@ -89,7 +89,9 @@ class HuskyCBFController:
         self._evasion, self._waiting, self._bracing = (
             MoverEvasion(config.guidance, inflation_m, growth_s) for _ in range(3)
         )
-        self._escape = Escape(config.escape, base.tau_s)
+        footprint = config.footprint
+        swing_m = math.hypot(footprint.half_length_m, footprint.half_width_m) - self._disc_radius
+        self._escape = Escape(config.escape, base.tau_s, swing_m)
         self._step = extended_step(base.tau_s, config.response)
         #: from now to the instant the first command acts (s): the prediction's span less the latency
         self._plan_start_s = max(self._pipe.delay_s - config.sensing_latency_s, 0.0)
@@ -168,7 +170,9 @@ class HuskyCBFController:
         target = self._evasion.waypoint(pose, meant, obstacles)
         if target is not None or not slow_trajectory:
             self._waiting.reset()
-        escape = self._escape_waypoint(pose, goal, set_point, target is not None, circles, obstacles, t)
+        escape = self._escape_waypoint(
+            pose, goal, set_point, slow_trajectory, target is not None, circles, obstacles, t
+        )
         if escape is not None:
             target = [escape.x_m, escape.y_m, escape.heading_rad]
             return np.tile(target, (base.horizon + 1, 1)), np.zeros((base.horizon, 2)), True
@@ -188,7 +192,12 @@ class HuskyCBFController:
         if target is not None:
             goal = np.array([target.x_m, target.y_m, target.heading_rad])
         tabu = self._escape.tabu_circles(t)
-        waypoint = self._guidance.waypoint(pose[:2], goal, obstacles, tabu, slow_trajectory)
+        # on a slow reference the robot waits for movers at its point on purpose (_waiting_spot,
+        # _heading_across), not for them to clear a way: with guidance waiting too, a robot back at
+        # its point sooner met a mover head-on there and was caught (slow_circle_among_movers, check)
+        waypoint = self._guidance.waypoint(
+            pose[:2], goal, obstacles, tabu, slow_trajectory, may_wait=not slow_trajectory
+        )
         if waypoint is not None and self._evasion.active:
             # stepping aside round an obstacle: the way round, backwards if that turns less. Its
             # forward heading turned a robot facing away from the way round through the mover's
@@ -264,17 +273,22 @@ class HuskyCBFController:
         pose: np.ndarray,
         goal: np.ndarray,
         set_point: bool,
+        slow_trajectory: bool,
         evading: bool,
         circles: np.ndarray,
         obstacles: Sequence[Obstacle],
         t: float,
     ) -> Waypoint | None:
         """The deadlock escape's waypoint (escape.py), or None. Not while stepping aside from a
-        mover: that robot leaves its way on purpose."""
+        mover: that robot leaves its way on purpose. On a trajectory, only while the NMPC tracks
+        the reference itself (guidance's way round handles a blocked way: escaping from it, a
+        robot chased its goal round the far side of a cylinder and fell metres behind,
+        paper_dynamic_tracking_crossing), and never on a slow one, where the robot waits for
+        movers at its point on purpose (_waiting_spot, _heading_across)."""
         escape = self.config.escape
-        if not escape.enabled or not (escape.on_trajectories or set_point):
+        if not escape.enabled or slow_trajectory or not (escape.on_trajectories or set_point):
             return None
-        if evading:
+        if evading or (not set_point and self._guidance.guided):
             self._escape.pause()
             return None
 

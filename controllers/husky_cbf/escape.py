@@ -7,8 +7,11 @@ notices (the robot neither came `progress_min_m` closer to its target nor moved 
 `progress_window_s`, or it was commanded to stand still for `idle_s`, away from the target), and
 the escape then hands the NMPC waypoints the short horizon cannot find by itself:
 
-1. `turn`: where it stands, to face the way (the bearing to a point `drive_m` along a shortest
-   path round the obstacles, guidance.Guidance.plan_path), if it faces more than `aim_rad` away;
+1. `turn`: to face the way (the bearing to a point `drive_m` along a shortest path round the
+   obstacles, guidance.Guidance.plan_path), if it faces more than `aim_rad` away; where it stands,
+   or, if its body cannot swing round there (its corners would meet an obstacle), first `room`:
+   along its axis, forwards or backwards (whichever is nearer), to the nearest point where it can,
+   as Nav2's recoveries rotate only where there is room;
 2. `drive`: to that point;
 3. a robot told to stand still (pinned at an obstacle), or stalled again within
    `memory_radius_m` of an earlier stall, starts with `back_up` (`back_up_m` straight back, where
@@ -28,7 +31,7 @@ from collections.abc import Callable
 import numpy as np
 
 from controllers.husky_cbf.config import EscapeConfig
-from controllers.husky_cbf.guidance import Waypoint, segment_blocked
+from controllers.husky_cbf.guidance import Waypoint, arc_lengths, segment_blocked
 from controllers.model import wrap_angle
 
 #: a path from the robot to the target (m), given extra circles [x, y, r] to avoid: Guidance.plan_path
@@ -71,15 +74,18 @@ class Escape:
     """The recovery behaviours after a stall (module docstring): a queue of phases, each a
     waypoint held until it is reached, times out, or the robot stalls in it."""
 
-    def __init__(self, config: EscapeConfig, tau_s: float) -> None:
+    def __init__(self, config: EscapeConfig, tau_s: float, swing_m: float = 0.0) -> None:
         self.config = config
         self.tau_s = tau_s
+        #: how much farther (m) the body's corners reach, turning in place, than the inflated
+        #: obstacles already allow for (the circumscribed radius less the body disc's)
+        self.swing_m = swing_m
         self.checker = ProgressChecker(config, tau_s)
         self.reset()
 
     def reset(self) -> None:
         self.checker.reset()
-        self.phase = ""  # "", "back_up", "turn" or "drive"
+        self.phase = ""  # "", "back_up", "room", "turn" or "drive"
         self._queue: list[str] = []
         self._waypoint: Waypoint | None = None
         self._phase_steps = 0
@@ -149,7 +155,9 @@ class Escape:
             for xy, when in self._stalls
         )
         self._stalls.append((pose[:2].copy(), t))
-        self._queue = ["back_up", "turn", "drive"] if repeat or again else ["turn", "drive"]
+        self._queue = ["room", "turn", "drive"]
+        if repeat or again:
+            self._queue.insert(0, "back_up")
         if again:  # the way through this spot failed before: guidance goes round it now
             self._tabu.append((float(pose[0]), float(pose[1]), cfg.tabu_radius_m, t + cfg.tabu_s))
         self.started += 1
@@ -186,11 +194,38 @@ class Escape:
             return Waypoint(float(behind[0]), float(behind[1]), heading, np.array([xy, behind]))
         way = self._way_point(xy, target, plan_path, t)
         bearing = math.atan2(way[1] - xy[1], way[0] - xy[0])
+        if phase == "room":
+            if abs(float(wrap_angle(bearing - heading))) <= cfg.aim_rad:
+                return None
+            room = self._room_to_turn(xy, heading, circles)
+            return (
+                None
+                if room is None
+                else Waypoint(float(room[0]), float(room[1]), heading, np.array([xy, room]))
+            )
         if phase == "turn":
             if abs(float(wrap_angle(bearing - heading))) <= cfg.aim_rad:
                 return None
             return Waypoint(float(xy[0]), float(xy[1]), bearing, np.array([xy, xy]))
         return Waypoint(float(way[0]), float(way[1]), bearing, np.array([xy, way]))
+
+    def _room_to_turn(self, xy: np.ndarray, heading: float, circles: np.ndarray) -> np.ndarray | None:
+        """A point (m) just past the nearest one along the robot's axis, forwards or backwards
+        within drive_m, in steps of arrive_m, where its body can swing round, reached in a straight
+        line; None where it can swing round already, or nowhere within reach."""
+        cfg = self.config
+        if not segment_blocked(xy, xy, circles, self.swing_m):
+            return None
+        axis = np.array([math.cos(heading), math.sin(heading)])
+        steps = int(cfg.drive_m / cfg.arrive_m)
+        for along in cfg.arrive_m * np.arange(1, steps + 1):
+            for sign in (1.0, -1.0):
+                # the waypoint lies arrive_m past the first such point: reached, the robot is there
+                point, beyond = (xy + sign * reach * axis for reach in (along, along + cfg.arrive_m))
+                swing_free = not any(segment_blocked(q, q, circles, self.swing_m) for q in (point, beyond))
+                if swing_free and not segment_blocked(xy, beyond, circles):
+                    return beyond
+        return None
 
     def _way_point(self, xy: np.ndarray, target: np.ndarray, plan_path: PathPlanner, t: float) -> np.ndarray:
         """The point drive_m along a shortest path to the target avoiding the tabu spots (m); the
@@ -202,7 +237,7 @@ class Escape:
             offset = goal - xy
             length = math.hypot(*offset)
             return goal if length <= cfg.drive_m else xy + cfg.drive_m * offset / length
-        along = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(path, axis=0).T))])
+        along = arc_lengths(path)
         index = int(np.searchsorted(along, cfg.drive_m))
         return np.asarray(path[min(index, len(path) - 1)], dtype=float)
 

@@ -67,6 +67,11 @@ def inflated_circles(
     return out
 
 
+def arc_lengths(path: np.ndarray) -> np.ndarray:
+    """The distance (m) along a polyline (K, 2) from its first point to each of its points."""
+    return np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(path, axis=0).T))])
+
+
 def segment_blocked(a: np.ndarray, b: np.ndarray, circles: np.ndarray, extra_m: float = 0.0) -> bool:
     """Whether the segment a-b (m) passes within r + extra_m of any circle's centre."""
     if circles.size == 0:
@@ -150,15 +155,18 @@ class Guidance:
         obstacles: Sequence[Obstacle],
         extra: np.ndarray | None = None,
         behind_movers: bool = False,
+        may_wait: bool = True,
     ) -> Waypoint | None:
         """A waypoint toward goal [x, y, heading] (m, m, rad) if the straight way is blocked by
         the obstacles or the `extra` circles [x, y, r] (m); `behind_movers`: movers as the NMPC
-        sees them ahead (mover_lead_s), for a robot waiting on a slow trajectory."""
+        sees them ahead (mover_lead_s), for a robot waiting on a slow trajectory; `may_wait`:
+        whether the robot may wait for movers to clear a shorter way (_wait_for_movers)."""
         cfg = self.config
         robot_xy = np.asarray(robot_xy, dtype=float)
         circles = self.circles(robot_xy, obstacles, extra, behind_movers)
-        extra = cfg.release_margin_m if self.guided else 0.0
-        if not segment_blocked(robot_xy, goal[:2], circles, extra):
+        lead_s = self.mover_lead_s if behind_movers else 0.0
+        margin = cfg.release_margin_m if self.guided else 0.0
+        if not segment_blocked(robot_xy, goal[:2], circles, margin):
             self.guided, self.path = False, None
             return None
         # among movers the way round changes for real from step to step: no hysteresis
@@ -167,8 +175,63 @@ class Guidance:
         if path is None or len(path) < 2:  # no way round (yet): wait behind the obstacle
             self.guided, self.path = False, None
             return None
+        shorter = (
+            self._wait_for_movers(robot_xy, goal, obstacles, extra, path, lead_s)
+            if may_wait and not static
+            else None
+        )
+        path = path if shorter is None else shorter
         self.guided, self.path = True, path
         return self._carrot(robot_xy, path, circles, goal)
+
+    def _wait_for_movers(
+        self,
+        robot_xy: np.ndarray,
+        goal: np.ndarray,
+        obstacles: Sequence[Obstacle],
+        extra: np.ndarray | None,
+        path: np.ndarray,
+        lead_s: float,
+    ) -> np.ndarray | None:
+        """The shortest way round the static obstacles alone ((K, 2), m) instead of `path`, the way
+        round the movers too, if a robot driving it at detour_speed_mps, now or after a wait
+        shorter than `path`'s extra length takes at that speed, meets no mover (as guidance sweeps
+        it, where it will be when the robot gets there); else None. A mover going the robot's way
+        across a gap closed it for a moment, and the robot turned back for the long way round,
+        then back again once it had passed (paper_dynamic_tracking_crossing, check)."""
+        cfg = self.config
+        moving = [math.hypot(o.vx_mps, o.vy_mps) > cfg.static_speed_mps for o in obstacles]
+        statics = [o for o, m in zip(obstacles, moving, strict=True) if not m]
+        movers = [o for o, m in zip(obstacles, moving, strict=True) if m]
+        static_path = self._shortest_path(
+            robot_xy, np.asarray(goal[:2], dtype=float), self.circles(robot_xy, statics, extra), False
+        )
+        if static_path is None or len(static_path) < 2:
+            return None
+        along = arc_lengths(static_path)
+        detour_s = (arc_lengths(path)[-1] - along[-1]) / cfg.detour_speed_mps
+        arrival_s = along / cfg.detour_speed_mps
+        # a mover's circles cover mover_sweep_s of its track: waits that far apart overlap halfway
+        for wait_s in np.arange(0.0, detour_s, 0.5 * cfg.mover_sweep_s):
+            if not any(
+                self._meets(static_path, lead_s + wait_s + arrival_s, mover, robot_xy) for mover in movers
+            ):
+                return static_path
+        return None
+
+    def _meets(self, path: np.ndarray, times_s: np.ndarray, mover: Obstacle, robot_xy: np.ndarray) -> bool:
+        """Whether a robot at path[i] (m) at times_s[i] (s) is inside `mover`'s circle as guidance
+        sweeps it from then on, at any i: inflated_circles' sweep (whose first circle, if it holds
+        the robot now, is shrunk to exclude it) carried along the track to each time."""
+        circles = inflated_circles(
+            [mover], self.inflation_m, self.config.mover_sweep_s, robot_xy, self.mover_growth_s
+        )
+        offsets = circles[:, :2] - circles[:1, :2]  # the sweep's samples, from the first
+        radius = float(circles[0, 2])
+        velocity = np.array([mover.vx_mps, mover.vy_mps])
+        centres = circles[0, :2] + times_s[:, None, None] * velocity + offsets[None, :, :]
+        gaps = np.hypot(*(path[:, None, :] - centres).transpose(2, 0, 1))
+        return bool(np.any(gaps < radius))
 
     def _shortest_path(
         self, start: np.ndarray, goal: np.ndarray, circles: np.ndarray, sticky: bool
@@ -242,7 +305,7 @@ class Guidance:
         self, robot_xy: np.ndarray, path: np.ndarray, circles: np.ndarray, goal: np.ndarray
     ) -> Waypoint:
         cfg = self.config
-        along = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(path, axis=0).T))])
+        along = arc_lengths(path)
         chosen = 1
         for i in range(1, len(path)):
             if along[i] > cfg.lookahead_m:

@@ -58,6 +58,33 @@ def test_a_slow_stall_turns_to_the_way_then_drives_along_it() -> None:
     assert escape.phase == "" and not escape.reversing
 
 
+def test_a_robot_that_cannot_swing_round_where_it_stalled_first_moves_along_its_axis_to_room() -> None:
+    """Beside an obstacle its corners would meet turning in place, the escape first drives along
+    the robot's axis, the nearer way (here backwards), to just past where the body swings free;
+    then it turns there. With nothing in the way, or a body that swings within its discs, it turns
+    where it stands."""
+    config, swing = EscapeConfig(), 0.2
+    target, pose = np.array([-3.0, 0.0, math.pi]), np.array([0.0, 0.0, 0.0])  # behind the robot
+    beside = np.array([[0.2, 0.8, 0.65]])  # clear of the discs (0.8 m > 0.65 m), not of the swing
+
+    def stall(escape: Escape, circles: np.ndarray) -> object:
+        for k in range(round(config.progress_window_s / TAU) + 1):
+            waypoint = escape.waypoint(pose, target, MOVING, circles, _no_path, 0.1 * k)
+        return waypoint
+
+    escape = Escape(config, TAU, swing)
+    room = stall(escape, beside)
+    assert escape.phase == "room" and not escape.reversing
+    assert (room.x_m, room.y_m, room.heading_rad) == pytest.approx((-2 * config.arrive_m, 0.0, 0.0))
+    turn = escape.waypoint(np.array([room.x_m, 0.0, 0.0]), target, MOVING, beside, _no_path, 3.2)
+    assert escape.phase == "turn" and (turn.x_m, turn.y_m) == pytest.approx((room.x_m, 0.0))
+    assert abs(turn.heading_rad) == pytest.approx(math.pi)
+    for circles, swing_m in ((np.zeros((0, 3)), swing), (beside, 0.0)):
+        free = Escape(config, TAU, swing_m)
+        stall(free, circles)
+        assert free.phase == "turn"
+
+
 def test_a_robot_told_to_stand_still_backs_up_first_where_there_is_room() -> None:
     config = EscapeConfig()
     target = np.array([4.0, 0.0, 0.0])

@@ -55,13 +55,12 @@ HORIZONS = (5, 7, 12)
 BACKENDS = ("fatrop", "ipopt")
 
 #: Cells husky-cbf does not pass on the calibrated plant (the default ground, wet_grass), on either
-#: backend (the same outcome on both). In gap_with_mover at N = 5 it crosses the mover's track
-#: just ahead of it, slows to turn for the goal and is caught. Measured outcomes (FATROP; IPOPT);
-#: the issue "husky-cbf, trial-ready" takes it on. Strict: a cell that passes again fails here
-#: until its line is removed.
-FAILING_ON_CALIBRATED_PLANT = {
-    ("gap_with_mover", 5): "collided, min clearance -0.001 m; -0.016 m",
-}
+#: backend (the same outcome on both), with their measured outcomes (FATROP; IPOPT). None now:
+#: gap_with_mover at N = 5 (it crossed the mover's track just ahead of it, slowed to turn for the
+#: goal and was caught) reaches the goal since guidance follows a mover through a gap rather than
+#: turn back for the long way round. Strict: a cell that passes again fails here until its line
+#: is removed.
+FAILING_ON_CALIBRATED_PLANT: dict[tuple[str, int], str] = {}
 
 
 def _marks(path: Path, n: int) -> list[pytest.MarkDecorator]:
@@ -192,6 +191,24 @@ def test_guidance_routes_round_a_blocking_obstacle_and_leaves_a_clear_line_alone
     assert not segment_blocked(np.zeros(2), np.array([waypoint.x_m, waypoint.y_m]), circles)
     assert np.min(np.hypot(waypoint.path[:, 0] - 4.0, waypoint.path[:, 1] - 0.1)) > 1.08
     assert math.hypot(waypoint.path[-1, 0] - 8.0, waypoint.path[-1, 1]) < 0.1
+
+
+def test_guidance_follows_a_mover_through_a_gap_rather_than_turn_back_for_the_long_way() -> None:
+    """paper_dynamic_tracking_crossing, check: a mover going the robot's way closed the gap north
+    of the cylinder for a moment, and the robot turned back south for the long way round, then
+    north again once it had passed. Guidance takes the gap when the robot, driving it, would meet
+    the mover nowhere (it follows it), and the long way when the mover all but stands in it."""
+    guidance = Guidance(GuidanceConfig(), inflation_m=0.49, mover_growth_s=0.93)
+    robot, goal = np.array([4.0, 1.6]), np.array([0.5, 2.0, math.pi])  # the gap: north-west
+
+    def way_round(speed_mps: float) -> float:
+        cylinder, mover = Obstacle(2.0, 1.0, 0.4), Obstacle(2.6, 3.0, 0.3, vx_mps=-speed_mps)
+        waypoint = guidance.waypoint(robot, goal, [cylinder, mover])
+        assert waypoint is not None and guidance.guided
+        return waypoint.y_m
+
+    assert way_round(0.4) > 1.6  # north, through the gap behind the mover
+    assert way_round(0.06) < 1.0  # south: a mover at 6 cm/s blocks the gap for a minute
 
 
 def test_the_way_round_a_static_obstacle_dead_ahead_keeps_its_side_under_noise() -> None:
@@ -454,6 +471,37 @@ def test_a_robot_stepping_aside_round_an_obstacle_backs_along_the_way_round_if_t
     x, y, heading = states[-1]
     assert x < pose[0] - 0.3 and abs(y - post.y_m) > 0.1  # west, round the post
     assert math.cos(heading - pose[2]) > 0.0  # facing east still: backing, not turning round
+
+
+def test_a_tracking_robot_that_cannot_swing_round_beside_a_cylinder_first_drives_to_room() -> None:
+    """paper_dynamic_tracking_crossing, check: the robot stood 8 s beside the cylinder at
+    (-2.3, 1.5), facing west-south-west, its reference moving off south; turning in place towards
+    it swings the rear into the cylinder, and the 0.5 s horizon sees no way out. Stalled while it
+    tracks its reference, it escapes as on a set-point, first forwards along its axis to room to
+    swing round; with the cylinder a metre farther off it turns where it stands. Guided round an
+    obstacle it is not escaped: guidance's way round is already the way out."""
+    path = next(p for p in shipped_scenarios() if p.stem == "paper_dynamic_tracking_crossing")
+    scenario = load_scenario(path)
+    reference = scenario.reference_object()
+    pose = np.array([-2.1, 0.63, -2.8])
+    axis = np.array([math.cos(pose[2]), math.sin(pose[2])])
+
+    def stalled(cylinder: Obstacle, at: np.ndarray = pose) -> tuple[str, np.ndarray, bool]:
+        controller = scenario.make_controller("husky-cbf")
+        window_s = controller.config.escape.progress_window_s
+        for k in range(round(2 * window_s / controller.tau_s)):  # the robot does not move
+            result = controller.solve(at, reference, [cylinder], 27.0 + k * controller.tau_s)
+            if result.escape:
+                break
+        return result.escape, result.predicted_states, controller._guidance.guided
+
+    phase, plan, _ = stalled(Obstacle(-2.3, 1.5, 0.4))
+    assert phase == "room"
+    assert (plan[-1, :2] - pose[:2]) @ axis > 0.05  # forwards, away from the cylinder
+    assert stalled(Obstacle(-2.3, 2.5, 0.4))[0] == "turn"
+    # 1.7 m east of its goal (the reference 1 s ahead, near (-2.2, 0.8)), a cylinder between
+    phase, _, guided = stalled(Obstacle(-1.3, 1.0, 0.4), np.array([-0.5, 1.2, math.pi]))
+    assert guided and phase == ""
 
 
 def _pipe(delay_s: float, tau_s: float = 0.2) -> CommandPipe:
