@@ -215,10 +215,11 @@ class EscapeConfig:
     tabu_radius_m: float = setting(0.5, 0.0, 5.0, "m")
     tabu_s: float = setting(20.0, 0.0, 600.0, "s", lo_open=True)
     enabled: bool = True
-    #: on trajectories too (never on a slow one, whose robot waits for movers on purpose): a robot
-    #: that stood 8 s beside a cylinder, unable to swing round to its reference, tracked again
-    #: once the escape took it forward to room to turn (paper_dynamic_tracking_crossing, check).
-    #: Its target is the tracking goal, which is past any obstacle the reference runs through
+    #: on trajectories too, while the NMPC tracks the reference itself (never on a slow one, whose
+    #: robot waits for movers on purpose): a robot that stood 8 s beside a cylinder, unable to
+    #: swing round to its reference, tracked again once the escape took it forward to room to turn
+    #: (paper_dynamic_tracking_crossing, check). Its target is the tracking goal, which is past any
+    #: obstacle the reference runs through
     on_trajectories: bool = True
 
     def __post_init__(self) -> None:

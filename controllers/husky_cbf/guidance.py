@@ -11,7 +11,10 @@ Guidance detects that case and hands the NMPC a nearer waypoint instead of the g
 - then a shortest path on a cost grid (cells near obstacles cost more, so the path keeps its
   distance) by scipy.sparse.csgraph.dijkstra, and the waypoint is the farthest path point within
   `lookahead_m` that the robot can see. When nothing blocks, there is no waypoint and the NMPC
-  follows the paper's reference unchanged.
+  follows the paper's reference unchanged;
+- where movers block the way round the static obstacles alone, that way is still taken if the
+  movers will have cleared it by the time the robot gets there (after a wait shorter than the
+  detour): the robot follows a mover through a gap instead of turning back.
 """
 
 from __future__ import annotations
