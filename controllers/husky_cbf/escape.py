@@ -194,8 +194,9 @@ class Escape:
             return Waypoint(float(behind[0]), float(behind[1]), heading, np.array([xy, behind]))
         way = self._way_point(xy, target, plan_path, t)
         bearing = math.atan2(way[1] - xy[1], way[0] - xy[0])
+        aimed = abs(float(wrap_angle(bearing - heading))) <= cfg.aim_rad  # no turn needed
         if phase == "room":
-            if abs(float(wrap_angle(bearing - heading))) <= cfg.aim_rad:
+            if aimed:
                 return None
             room = self._room_to_turn(xy, heading, circles)
             return (
@@ -204,7 +205,7 @@ class Escape:
                 else Waypoint(float(room[0]), float(room[1]), heading, np.array([xy, room]))
             )
         if phase == "turn":
-            if abs(float(wrap_angle(bearing - heading))) <= cfg.aim_rad:
+            if aimed:
                 return None
             return Waypoint(float(xy[0]), float(xy[1]), bearing, np.array([xy, xy]))
         return Waypoint(float(way[0]), float(way[1]), bearing, np.array([xy, way]))
