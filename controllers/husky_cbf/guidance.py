@@ -75,6 +75,18 @@ def arc_lengths(path: np.ndarray) -> np.ndarray:
     return np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(path, axis=0).T))])
 
 
+def _meets(path: np.ndarray, times_s: np.ndarray, sweep: np.ndarray, mover: Obstacle) -> bool:
+    """Whether a robot at path[i] (m) at times_s[i] (s) is inside a mover's swept circles `sweep`
+    ((S, 3), inflated_circles of that mover now, from its first circle), carried along its track
+    to each time, at any i."""
+    offsets = sweep[:, :2] - sweep[:1, :2]  # the sweep's samples, from the first
+    radius = float(sweep[0, 2])
+    velocity = np.array([mover.vx_mps, mover.vy_mps])
+    centres = sweep[0, :2] + times_s[:, None, None] * velocity + offsets[None, :, :]
+    gaps = np.hypot(*(path[:, None, :] - centres).transpose(2, 0, 1))
+    return bool(np.any(gaps < radius))
+
+
 def segment_blocked(a: np.ndarray, b: np.ndarray, circles: np.ndarray, extra_m: float = 0.0) -> bool:
     """Whether the segment a-b (m) passes within r + extra_m of any circle's centre."""
     if circles.size == 0:
@@ -214,27 +226,18 @@ class Guidance:
         along = arc_lengths(static_path)
         detour_s = (arc_lengths(path)[-1] - along[-1]) / cfg.detour_speed_mps
         arrival_s = along / cfg.detour_speed_mps
+        # each mover's sweep as guidance inflates it now (inflated_circles: its first circle, if
+        # it holds the robot, shrunk to exclude it), carried along the track to each arrival below
+        sweeps = [
+            (inflated_circles([m], self.inflation_m, cfg.mover_sweep_s, robot_xy, self.mover_growth_s), m)
+            for m in movers
+        ]
         # a mover's circles cover mover_sweep_s of its track: waits that far apart overlap halfway
         for wait_s in np.arange(0.0, detour_s, 0.5 * cfg.mover_sweep_s):
-            if not any(
-                self._meets(static_path, lead_s + wait_s + arrival_s, mover, robot_xy) for mover in movers
-            ):
+            times_s = lead_s + wait_s + arrival_s
+            if not any(_meets(static_path, times_s, circles, mover) for circles, mover in sweeps):
                 return static_path
         return None
-
-    def _meets(self, path: np.ndarray, times_s: np.ndarray, mover: Obstacle, robot_xy: np.ndarray) -> bool:
-        """Whether a robot at path[i] (m) at times_s[i] (s) is inside `mover`'s circle as guidance
-        sweeps it from then on, at any i: inflated_circles' sweep (whose first circle, if it holds
-        the robot now, is shrunk to exclude it) carried along the track to each time."""
-        circles = inflated_circles(
-            [mover], self.inflation_m, self.config.mover_sweep_s, robot_xy, self.mover_growth_s
-        )
-        offsets = circles[:, :2] - circles[:1, :2]  # the sweep's samples, from the first
-        radius = float(circles[0, 2])
-        velocity = np.array([mover.vx_mps, mover.vy_mps])
-        centres = circles[0, :2] + times_s[:, None, None] * velocity + offsets[None, :, :]
-        gaps = np.hypot(*(path[:, None, :] - centres).transpose(2, 0, 1))
-        return bool(np.any(gaps < radius))
 
     def _shortest_path(
         self, start: np.ndarray, goal: np.ndarray, circles: np.ndarray, sticky: bool
