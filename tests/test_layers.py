@@ -18,7 +18,20 @@ ALLOWED = {
     "bench": {"sim", "runs"},
     "ros2": {"sim", "runs"},
     "calibration": {"sim"},
-    "cli": {"sim", "runs", "viz", "study", "realcheck", "bench", "ros2", "calibration"},
+    "families": {"sim", "runs"},
+    "campaign": {"sim", "runs", "viz", "families"},
+    "cli": {
+        "sim",
+        "runs",
+        "viz",
+        "study",
+        "realcheck",
+        "bench",
+        "ros2",
+        "calibration",
+        "families",
+        "campaign",
+    },
 }
 SHARED = {"extras", "interrupts", "paths", "scenario_file"}  # the top-level modules every layer may use
 

@@ -1,5 +1,7 @@
 """`husky-sim bench-sim`: real-time factor of a closed-loop PyBullet episode and of bare physics
-stepping with 8 obstacles, plus the process's peak memory."""
+stepping with 8 obstacles, the same for a large world (1,000 static obstacles,
+scenarios/large/large_world_1000.yaml, through the scenario schema as `husky-sim run` builds it),
+plus the process's peak memory."""
 
 from __future__ import annotations
 
@@ -7,11 +9,13 @@ import math
 import resource
 import time
 from dataclasses import dataclass, replace
+from pathlib import Path
 
 import numpy as np
 
 from controllers import NMPCConfig, NMPCController, SetPoint, SolverOptions
 from controllers.config import SolverBackend
+from husky_sim.paths import SCENARIO_DIR
 from husky_sim.runs.paper_problems import CLUTTERED_POINT_STABILISATION
 from husky_sim.sim.drive import DriveConfig
 from husky_sim.sim.environment import PhysicsEnvironment
@@ -26,6 +30,8 @@ BENCH_OBSTACLES = (
     *obstacle_specs_from(CLUTTERED_POINT_STABILISATION.obstacles),
     ObstacleSpec(0.0, 12.5, 0.4),
 )
+#: The large world `bench-sim` times: 1,000 seeded static cylinders, the goal 30 m away.
+LARGE_WORLD = SCENARIO_DIR / "large" / "large_world_1000.yaml"
 
 
 @dataclass(frozen=True)
@@ -182,4 +188,119 @@ def run_sim_bench(
         walls[0],
         walls[1],
         peak_mb,
+    )
+
+
+@dataclass(frozen=True)
+class LargeWorldBench:
+    """One closed-loop episode of a large world (times in s of wall or CPU time, as named), and
+    physics stepping in the same world: bare (drive and engine) and with the clearance check."""
+
+    scenario: str
+    controller: str
+    obstacles: int
+    build_wall_s: float  # validating the file and building the controller and the episode
+    episode_sim_s: float
+    episode_wall_s: float
+    episode_cpu_s: float  # this process's CPU time (every thread)
+    episode_outcome: str
+    control_steps: int
+    solve_ms_median: float
+    solve_ms_p99: float
+    solve_total_s: float
+    stepping_steps: int
+    stepping_wall_s: float
+    checked_stepping_wall_s: float
+    checked_stepping_cpu_s: float
+    physics_hz: float
+    peak_rss_mb: float  # the process's, so far (a `bench-sim` run's small world included)
+
+    def report(self) -> str:
+        rtf_wall = self.episode_sim_s / self.episode_wall_s
+        rtf_cpu = self.episode_sim_s / self.episode_cpu_s
+        outside_ms = 1000.0 * (self.episode_wall_s - self.solve_total_s) / max(self.control_steps, 1)
+        bare_us = 1e6 * self.stepping_wall_s / self.stepping_steps
+        checked_us = 1e6 * self.checked_stepping_wall_s / self.stepping_steps
+        checked_cpu_us = 1e6 * self.checked_stepping_cpu_s / self.stepping_steps
+        budget_us = 1e6 / self.physics_hz
+        return "\n".join(
+            [
+                f"large world ({self.scenario}: {self.obstacles} static obstacles, {self.controller}, "
+                f"{self.physics_hz:g} Hz physics; built and validated in {self.build_wall_s:.2f} s): "
+                f"{self.episode_sim_s:.1f} s simulated in {self.episode_wall_s:.2f} s wall "
+                f"= {rtf_wall:.2f}x real time, {self.episode_cpu_s:.2f} s CPU = {rtf_cpu:.2f}x "
+                f"(outcome {self.episode_outcome})",
+                f"  solve per control step: median {self.solve_ms_median:.2f} ms, p99 "
+                f"{self.solve_ms_p99:.2f} ms; the rest of the loop (physics, clearance, sensing, "
+                f"log): {outside_ms:.2f} ms per control step",
+                f"  physics step: {bare_us:.0f} us bare, {checked_us:.0f} us with the clearance check "
+                f"({checked_cpu_us:.0f} us CPU; real time allows {budget_us:.0f} us)",
+                f"  peak resident memory of this process: {self.peak_rss_mb:.0f} MB",
+            ]
+        )
+
+
+def run_large_world_bench(
+    controller: str = "husky-cbf",
+    duration_s: float | None = None,
+    stepping_steps: int = 2400,
+    solver: SolverBackend | None = None,
+    scenario: Path = LARGE_WORLD,
+) -> LargeWorldBench:
+    """The large world's episode with `controller` for at most duration_s (s; None: the
+    scenario's own) of sim time (it ends early once the outcome is decided), timed in wall and
+    CPU time, then stepping_steps physics steps (rounded down to whole control periods, at least
+    one) bare and through the episode's own physics loop with its clearance check."""
+    from husky_sim.runs.run import run_settings
+    from husky_sim.runs.scenario import load_scenario
+
+    t0 = time.perf_counter()
+    sc = load_scenario(str(scenario)).with_overrides(solver=solver)
+    _, robot_radius_m = run_settings(sc, controller)
+    nmpc = sc.make_controller(controller)
+    config = sc.episode_config()
+    if duration_s is not None:
+        config = replace(config, duration_s=duration_s)
+    build_wall = time.perf_counter() - t0
+    t0, c0 = time.perf_counter(), time.process_time()
+    result = run_episode(nmpc, sc.reference_object(), config, robot_radius_m=robot_radius_m)
+    episode_wall, episode_cpu = time.perf_counter() - t0, time.process_time() - c0
+    solve_ms = np.array([float(row["solve_ms"]) for row in result.rows])
+
+    command = np.array([0.5, 0.1])
+    walls = []
+    with PhysicsEnvironment(config) as env:  # bare: the drive and the physics, no clearance check
+        world, robot, drive = env.world, env.robot, env.drive
+        periods = max(stepping_steps // env.substeps, 1)
+        stepping_steps = periods * env.substeps
+        t0 = time.perf_counter()
+        for _ in range(stepping_steps):
+            drive.step(robot, command, world.dt_s)
+            world.step()
+        walls.append(time.perf_counter() - t0)
+    with PhysicsEnvironment(config) as env:  # checked: the episode's own physics loop
+        t0, c0 = time.perf_counter(), time.process_time()
+        for _ in range(periods):
+            env.advance(command)
+        walls.append(time.perf_counter() - t0)
+        checked_cpu = time.process_time() - c0
+    return LargeWorldBench(
+        scenario=sc.name,
+        controller=controller,
+        obstacles=len(config.world.obstacles),
+        build_wall_s=build_wall,
+        episode_sim_s=result.metrics.sim_time_s,
+        episode_wall_s=episode_wall,
+        episode_cpu_s=episode_cpu,
+        episode_outcome=result.metrics.outcome,
+        control_steps=len(result.rows),
+        solve_ms_median=float(np.median(solve_ms)),
+        solve_ms_p99=float(np.percentile(solve_ms, 99)),
+        solve_total_s=float(np.sum(solve_ms)) / 1000.0,
+        stepping_steps=stepping_steps,
+        stepping_wall_s=walls[0],
+        checked_stepping_wall_s=walls[1],
+        checked_stepping_cpu_s=checked_cpu,
+        physics_hz=config.world.physics_hz,
+        peak_rss_mb=resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0,
     )

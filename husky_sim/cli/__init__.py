@@ -20,7 +20,9 @@ from husky_sim import interrupts
 from husky_sim.cli import (
     bench,
     calibrate,
+    campaign,
     check,
+    families,
     identify,
     paper,
     plot,
@@ -37,7 +39,22 @@ from husky_sim.extras import MissingExtra
 __all__ = ["SOLVER_CHOICES", "UsageError", "build_parser", "entry", "main"]
 
 #: The commands in the order `husky-sim --help` lists them.
-COMMANDS = (scenarios, run, ros2, render, suite, paper, bench, check, plot, identify, replay, calibrate)
+COMMANDS = (
+    scenarios,
+    families,
+    run,
+    ros2,
+    render,
+    suite,
+    campaign,
+    paper,
+    bench,
+    check,
+    plot,
+    identify,
+    replay,
+    calibrate,
+)
 
 
 def build_parser() -> argparse.ArgumentParser:

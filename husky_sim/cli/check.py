@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+from dataclasses import replace
 from typing import TYPE_CHECKING
 
 from husky_sim import interrupts
@@ -14,11 +15,19 @@ from husky_sim.cli.common import (
     default_controller,
     horizon_arg,
     jobs_arg,
+    number_in,
     path_arg,
     payload_arg,
     seed_arg,
     unit_float_arg,
 )
+
+#: Shortest and longest lidar range (m) `--sensing-range-m` takes (the longest is
+#: husky_sim.runs.scenario.MAX_SENSING_RANGE_M, kept equal by a test: the CLI does not import the
+#: schema until it runs).
+MIN_SENSING_RANGE_M = 0.1
+MAX_SENSING_RANGE_M = 1000.0
+sensing_range_arg = number_in(float, MIN_SENSING_RANGE_M, MAX_SENSING_RANGE_M)
 
 if TYPE_CHECKING:
     from husky_sim.realcheck.check import CheckOptions
@@ -31,6 +40,16 @@ def _options(args: argparse.Namespace, seed: int | None) -> CheckOptions:
     from husky_sim.realcheck.check import CheckOptions
     from husky_sim.realcheck.sweep import PerturbationRanges
 
+    ranges = PerturbationRanges()
+    if args.payload_kg is not None:
+        ranges = replace(ranges, payload_kg=tuple(args.payload_kg))
+    if args.sensing_range_m is not None:
+        low, high = args.sensing_range_m
+        if low > high:
+            raise ValueError(f"--sensing-range-m: LOW ({low:g}) must not exceed HIGH ({high:g})")
+        ranges = replace(ranges, sensing_range_m=(low, high))
+    if args.occlusion:
+        ranges = replace(ranges, occlusion=(1, 1))
     return CheckOptions(
         controller=args.controller,
         horizon=args.horizon,
@@ -41,9 +60,7 @@ def _options(args: argparse.Namespace, seed: int | None) -> CheckOptions:
         scheduler=args.scheduler,
         timing_solves=args.timing_solves,
         min_pass_rate=args.min_pass_rate,
-        ranges=PerturbationRanges()
-        if args.payload_kg is None
-        else PerturbationRanges(payload_kg=tuple(args.payload_kg)),
+        ranges=ranges,
     )
 
 
@@ -99,7 +116,7 @@ def cmd_check_table(args: argparse.Namespace) -> int:
 
 def _add_check_options(parser: argparse.ArgumentParser) -> None:
     """What `check` and `check-table` share: the controller, N, samples, solver, workers, the pass
-    rate needed and the payload range."""
+    rate needed, the payload range and the lidar's visibility model."""
     parser.add_argument("--controller", choices=controller_choices(), default=default_controller())
     parser.add_argument(
         "--horizon", type=horizon_arg, default=None, help="prediction steps N (default: the file's)"
@@ -123,6 +140,21 @@ def _add_check_options(parser: argparse.ArgumentParser) -> None:
         help="payload range drawn, kg, at most the robot's maximum payload (default 0 to its "
         "all-terrain payload: for the Husky, Clearpath's rating for turning in place); check with "
         "the payload the robot will carry",
+    )
+    parser.add_argument(
+        "--sensing-range-m",
+        type=sensing_range_arg,
+        nargs=2,
+        metavar=("LOW", "HIGH"),
+        default=None,
+        help=f"lidar range drawn per sample, m, in [{MIN_SENSING_RANGE_M:g}, {MAX_SENSING_RANGE_M:g}] "
+        "(default: not perturbed, the scenario's own range; the controller is told only of the "
+        "obstacles the lidar sees)",
+    )
+    parser.add_argument(
+        "--occlusion",
+        action="store_true",
+        help="every sample's lidar is occluded by static obstacles (default: the scenario's own setting)",
     )
 
 

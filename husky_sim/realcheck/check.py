@@ -18,6 +18,7 @@ except the wall-clock fields (sweep.WALL_CLOCK_KEYS) and the audit's measured so
 from __future__ import annotations
 
 import json
+import math
 import sys
 from collections import Counter
 from collections.abc import Callable, Sequence
@@ -31,6 +32,7 @@ from controllers import registry
 from husky_sim.realcheck.audit import AuditThresholds, Finding, audit, measure_solve_times
 from husky_sim.realcheck.steerability import CAN_PIVOT_RADPS, failure_class
 from husky_sim.realcheck.sweep import (
+    SENSING_MODEL_FIELDS,
     Perturbation,
     PerturbationRanges,
     SampleTask,
@@ -107,7 +109,10 @@ class CheckReport:
         out = {f.name: getattr(self, f.name) for f in fields(self)}
         out["findings"] = [f.as_dict() for f in self.findings]
         out["perturbations"] = [p.as_dict() for p in self.perturbations]
-        out["ranges"] = asdict(self.ranges)
+        out["ranges"] = {  # strict JSON: an unlimited (not perturbed) range is null
+            k: [None if isinstance(x, float) and math.isinf(x) else x for x in v]
+            for k, v in asdict(self.ranges).items()
+        }
         out["failure_files"] = {str(k): v for k, v in self.failure_files.items()}
         return out
 
@@ -403,7 +408,11 @@ def markdown(report: CheckReport, plots: dict[str, str]) -> str:
         "",
         "| perturbation | range |",
         "|---|---|",
-        *(f"| {k} | {v[0]:g} to {v[1]:g} |" for k, v in asdict(report.ranges).items()),
+        *(
+            f"| {k} | {v[0]:g} to {v[1]:g} |"
+            for k, v in asdict(report.ranges).items()
+            if k not in SENSING_MODEL_FIELDS or v[0] != v[1]  # the lidar model only when drawn
+        ),
         "",
         "Obstacle speed error is on the sensing side: the controller is told velocity x scale while "
         "the obstacles keep their true motion. Friction, payload, latency and noise replace the "

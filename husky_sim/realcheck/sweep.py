@@ -6,6 +6,10 @@ estimation error and a wheel-torque derating, and writes them into a copy of the
 (`apply_perturbation`, validated again by the scenario schema). The perturbed scenario is a
 plain scenario file: saved as YAML it reproduces the sample with ``husky-sim run``.
 
+The lidar's visibility model (husky_sim.sim.sensing: range, occlusion) is perturbed only when
+asked (``--sensing-range-m LOW HIGH``, ``--occlusion``): its default ranges draw nothing, so a
+seeded check draws the same samples, and reaches the same verdicts, as without it.
+
 Obstacle speed error: in the simulator the controller is told each obstacle's *true* velocity, so
 changing how fast an obstacle really moves would only make a different scenario the controller
 still knows exactly. What a real robot gets wrong is its *estimate* of that velocity. The sweep
@@ -30,6 +34,7 @@ Execution backends, both through husky_sim.runs.parallel.parallel_map as the sui
 
 from __future__ import annotations
 
+import math
 import os
 from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass, fields, replace
@@ -39,7 +44,7 @@ import numpy as np
 
 from husky_sim.realcheck.steerability import steerability
 from husky_sim.runs.parallel import Backend, parallel_map
-from husky_sim.runs.scenario import Scenario, scenario_from_data
+from husky_sim.runs.scenario import MAX_SENSING_RANGE_M, Scenario, scenario_from_data
 from husky_sim.sim.robot_description import RobotDescription
 from husky_sim.sim.tyre import stiffness_ratio_for_yaw_ratio
 
@@ -86,14 +91,29 @@ class PerturbationRanges:
     #: the plant's steady yaw ratio (measured / wheel-implied yaw rate): the real runs we know span
     #: 0.43-0.54 (husky_sim.calibration); set through the tyres' lateral stiffness
     yaw_ratio: tuple[float, float] = (0.43, 0.54)
+    #: the lidar's range (m, sensing.range_m) in (0, MAX_SENSING_RANGE_M]; (inf, inf): not
+    #: perturbed (each sample keeps the scenario's range)
+    sensing_range_m: tuple[float, float] = (math.inf, math.inf)
+    #: occlusion by static obstacles (sensing.occlusion), an inclusive integer range of 0 (the
+    #: scenario's own setting) and 1 (on): (0, 0) never forces it on, (1, 1) always, (0, 1) draws
+    occlusion: tuple[int, int] = (0, 0)
 
     def __post_init__(self) -> None:
         for f in fields(self):
-            if getattr(self, f.name) is None:
+            if getattr(self, f.name) is None or f.name in SENSING_MODEL_FIELDS:
                 continue
             low, high = getattr(self, f.name)
             if not (np.isfinite(low) and np.isfinite(high) and 0 <= low <= high):
                 raise ValueError(f"perturbation range {f.name}: need 0 <= low <= high, got ({low}, {high})")
+        low, high = self.sensing_range_m
+        if (low, high) != (math.inf, math.inf) and not 0 < low <= high <= MAX_SENSING_RANGE_M:
+            raise ValueError(
+                f"perturbation range sensing_range_m: need 0 < low <= high <= {MAX_SENSING_RANGE_M:g} m "
+                f"(or inf, inf: not perturbed), got ({low}, {high})"
+            )
+        low, high = self.occlusion
+        if not (low in (0, 1) and high in (0, 1) and low <= high):
+            raise ValueError(f"perturbation range occlusion: need 0 <= low <= high <= 1, got ({low}, {high})")
 
     def for_robot(self, robot: RobotDescription) -> PerturbationRanges:
         """These ranges with the payload decided for `robot`: 0 to its all-terrain payload unless
@@ -123,25 +143,31 @@ class Perturbation:
     obstacle_velocity_scale: float
     torque_scale: float
     yaw_ratio: float
+    sensing_range_m: float | None = None  # None: the scenario's own range
+    occlusion: bool = False  # True: occlusion on (False: the scenario's own setting)
 
-    def as_dict(self) -> dict[str, float | int]:
+    def as_dict(self) -> dict[str, float | int | bool | None]:
         return asdict(self)
 
     def describe(self) -> str:
         """One line with every perturbed value and its unit."""
+        sensing = "" if self.sensing_range_m is None else f"sensing range {self.sensing_range_m:.1f} m, "
+        sensing += "occlusion on, " if self.occlusion else ""
         return (
             f"friction {self.ground_friction:.2f}, payload {self.payload_kg:.1f} kg, "
             f"latency {self.latency_steps} steps, pose noise {self.pose_xy_std_m * 100:.1f} cm / "
             f"{np.degrees(self.pose_yaw_std_rad):.2f} deg, "
             f"obstacle noise {self.obstacle_xy_std_m * 100:.1f} cm, "
             f"obstacle speed x{self.obstacle_velocity_scale:.2f}, torque x{self.torque_scale:.2f}, "
-            f"yaw ratio {self.yaw_ratio:.2f}, "
+            f"yaw ratio {self.yaw_ratio:.2f}, {sensing}"
             f"seed {self.episode_seed}"
         )
 
 
 def sample_perturbations(ranges: PerturbationRanges, count: int, seed: int) -> list[Perturbation]:
-    """`count` perturbations drawn in a fixed order from default_rng(seed): same inputs, same list."""
+    """`count` perturbations drawn in a fixed order from default_rng(seed): same inputs, same list.
+    The sensing model's fields are drawn last, and only from a range of more than one value (a
+    single value is taken as is), so its default ranges leave every other draw as it was."""
     if count < 1:
         raise ValueError(f"samples: must be >= 1, got {count}")
     if ranges.payload_kg is None:
@@ -165,8 +191,25 @@ def sample_perturbations(ranges: PerturbationRanges, count: int, seed: int) -> l
         low, high = ranges.latency_steps
         latency = int(rng.integers(int(low), int(high) + 1))
         uniform["yaw_ratio"] = float(rng.uniform(*ranges.yaw_ratio))  # drawn last: the others as before
-        out.append(Perturbation(index=i, episode_seed=episode_seed, latency_steps=latency, **uniform))
+        sensing = _draw_sensing(ranges, rng)  # after yaw_ratio, and nothing at its defaults
+        out.append(
+            Perturbation(index=i, episode_seed=episode_seed, latency_steps=latency, **uniform, **sensing)
+        )
     return out
+
+
+#: The sensing model's fields of PerturbationRanges (their own defaults mean "not perturbed").
+SENSING_MODEL_FIELDS = ("sensing_range_m", "occlusion")
+
+
+def _draw_sensing(ranges: PerturbationRanges, rng: np.random.Generator) -> dict[str, float | bool | None]:
+    """One sample's sensing range (m; None: not perturbed) and occlusion, drawn only from ranges
+    of more than one value."""
+    low, high = ranges.sensing_range_m
+    range_m = None if math.isinf(low) else float(low if low == high else rng.uniform(low, high))
+    low, high = ranges.occlusion
+    occlusion = bool(low if low == high else rng.integers(int(low), int(high) + 1))
+    return {"sensing_range_m": range_m, "occlusion": occlusion}
 
 
 def nominal_current_a(scenario: Scenario) -> float:
@@ -196,6 +239,10 @@ def apply_perturbation(scenario: Scenario, p: Perturbation) -> Scenario:
         obstacle_xy_std_m=p.obstacle_xy_std_m,
         obstacle_velocity_scale=scenario.sensing.obstacle_velocity_scale * p.obstacle_velocity_scale,
     )
+    if p.sensing_range_m is not None:
+        data["sensing"]["range_m"] = p.sensing_range_m
+    if p.occlusion:
+        data["sensing"]["occlusion"] = True
     return scenario_from_data(data, f"check sample {p.index}")
 
 

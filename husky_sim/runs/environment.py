@@ -51,7 +51,8 @@ class HuskyNavEnv(gymnasium.Env):
     limits (the action space is the drive's velocity limits). Observation (what a controller is
     told, plus the body's velocity): `pose` [x m, y m, yaw rad] as sensed (the scenario's noise
     and latency), `velocity` [v m/s, omega rad/s] of the body, `reference` [x m, y m, yaw rad] at
-    the current time, `obstacles` the nearest OBSERVED_OBSTACLES sensed circles as rows [dx m, dy
+    the current time, `obstacles` the nearest OBSERVED_OBSTACLES sensed circles (of those the
+    scenario's sensing model sees: husky_sim.sim.sensing; by default every one) as rows [dx m, dy
     m (from the sensed pose, world frame), radius m, vx m/s, vy m/s], and `obstacle_mask` (1 where
     a row is an obstacle). Reward: minus the position error (m) to the reference at the step's end
     times tau, and -COLLISION_PENALTY on a collision. `terminated` on reached (a set-point held

@@ -4,9 +4,10 @@ Written with Foxglove's SDK (its MCAP writer and WebSocket server, its message s
 message is stamped with sim time (s since the episode's start, as ns), so the file is the same for
 the same scenario, seed and code. Channels:
 - `/tf` (FrameTransform odom -> base_link) and `/robot/pose` (PoseInFrame): the true base pose;
-- `/scene` (SceneUpdate): the robot's footprint box with its heading, the obstacles' cylinders,
-  the plan, the trail (one persistent line per second of travel) and the goal or the reference
-  path with the reference point;
+- `/scene` (SceneUpdate): the robot's footprint box with its heading, the obstacles' cylinders
+  (red where the controller was told of them this step, pale grey where the sensing model hid
+  them: the log's `visible_obstacles`), the plan, the trail (one persistent line per second of
+  travel) and the goal or the reference path with the reference point;
 - `/control` (JSON): commanded, drive-limited and measured body velocities (m/s, rad/s);
 - `/safety` (JSON): clearance (m), Relax-CBF and CLF slacks, active obstacle constraints, solve
   time (ms), and the step's solver status, fallback and guidance flags;
@@ -30,7 +31,7 @@ try:
     from foxglove import messages as fm
 except ImportError:  # the core install has no Foxglove SDK
     raise missing("foxglove", "foxglove", "run.mcap and --live") from None
-from husky_sim.sim.step_log import LOG_COLUMNS
+from husky_sim.sim.step_log import LOG_COLUMNS, parse_visible
 
 #: The file a run folder's recording is written to.
 MCAP_NAME = "run.mcap"
@@ -82,6 +83,7 @@ def _line(points: np.ndarray, color: fm.Color, thickness: float = 0.05, z: float
 
 _ROBOT = fm.Color(r=1.0, g=0.8, b=0.1, a=0.9)
 _OBSTACLE = fm.Color(r=0.85, g=0.2, b=0.2, a=0.8)
+_HIDDEN_OBSTACLE = fm.Color(r=0.6, g=0.6, b=0.6, a=0.3)  # not told to the controller this step
 _PLAN = fm.Color(r=0.1, g=0.5, b=1.0, a=1.0)
 _TRAIL = fm.Color(r=0.3, g=0.3, b=0.3, a=1.0)
 _REFERENCE = fm.Color(r=0.2, g=0.75, b=0.3, a=1.0)
@@ -198,6 +200,7 @@ class FoxgloveRecorder:
     ) -> list[fm.SceneEntity]:
         half_l, half_w = self._half
         body = fm.Vector3(x=2 * half_l, y=2 * half_w, z=0.4)
+        visible = set(parse_visible(row["visible_obstacles"]))
         robot = self._entity(
             t,
             "robot",
@@ -211,9 +214,9 @@ class FoxgloveRecorder:
                 size=fm.Vector3(x=2 * r, y=2 * r, z=h),
                 bottom_scale=1.0,
                 top_scale=1.0,
-                color=_OBSTACLE,
+                color=_OBSTACLE if i in visible else _HIDDEN_OBSTACLE,
             )
-            for (cx, cy), r, h in zip(obstacle_xy, self._radii, self._heights, strict=True)
+            for i, ((cx, cy), r, h) in enumerate(zip(obstacle_xy, self._radii, self._heights, strict=True))
         ]
         entities = [robot, self._entity(t, "obstacles", cylinders=cylinders)]
         plan = result.predicted_states

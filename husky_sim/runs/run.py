@@ -69,9 +69,12 @@ def run_scenario(
     implementation: Controller | None = None,
     live_port: int | None = None,
     solver: str | None = None,
+    full_record: bool = True,
 ) -> RunSummary:
     """Run a scenario; return the summary (also written to out_dir/summary.json, with the log,
     the trace and run.mcap for Foxglove; `live_port` also streams it to Foxglove while it runs).
+    Without `full_record` out_dir gets the summary and the log only (a campaign's many runs: the
+    trace and the recording hold every obstacle at every sample and are the bulk of a folder).
 
     `implementation` runs in the controller's place (a rehearsal's DDS robot, whose decisions come
     from the named controller in another process); by default the named controller is built here.
@@ -84,7 +87,7 @@ def run_scenario(
         prepare_out_dir(out_dir)
     log_path = out_dir / LOG_FILE if out_dir is not None else None
     reference = sc.reference_object()
-    recorder = _recorder(sc, reference, out_dir, live_port)
+    recorder = _recorder(sc, reference, out_dir if full_record else None, live_port)
     finished = False
     try:
         result = run_episode(
@@ -107,8 +110,9 @@ def run_scenario(
         with interrupts.deferred():
             recorder.close(result.metrics.outcome, f"after {result.metrics.steps} steps")
     if out_dir is not None:
-        with interrupts.deferred():
-            result.trace.save(out_dir / TRACE_FILE)
+        if full_record:
+            with interrupts.deferred():
+                result.trace.save(out_dir / TRACE_FILE)
         write_summary(out_dir, summary)
     if result.interrupted_by is not None:
         raise RunInterrupted(result.interrupted_by)

@@ -54,13 +54,27 @@ if TYPE_CHECKING:
     from controllers import Controller, Reference
     from controllers.registry import PlanProfile
 
-#: Most obstacles in one scenario (explicit plus random): each is a slot in the NLP, and solve
-#: time grows with them (7 obstacles: about 5 ms at N = 5; 1,000: 266 ms).
-MAX_OBSTACLES = 64
+#: Most obstacles in one scenario (explicit plus random). The NLP is built for the nearest
+#: `controller.max_obstacle_slots` of them only, so its solve time does not grow with this; the
+#: physics, the clearance check, husky-cbf's guidance (which sees every obstacle), the sensing and
+#: the recordings do, about linearly (`husky-sim bench-sim` times 1,000 static ones). 5,000
+#: validate in well under a second (a random field that cannot be placed: a few seconds); a trace
+#: holds every obstacle's centre 60 times a second of sim time (16 bytes each: 1,000 obstacles for
+#: 10 minutes is 0.6 GB) unless none moves, when it holds them once.
+MAX_OBSTACLES = 5000
+#: Most obstacle slots an NLP may be built for (`controller.max_obstacle_slots`): each adds its
+#: constraints at every predicted step, and solve time grows with them (7 slots: about 5 ms at
+#: N = 5, the paper's OCP).
+MAX_OBSTACLE_SLOTS = 64
+#: Least gap (m) between the surfaces of two obstacles of a random field.
+RANDOM_GAP_M = 0.1
 #: Longest episode, in control steps (an hour at tau = 0.1 s).
 MAX_CONTROL_STEPS = 36_000
 #: Largest |x| or |y| of any position (m).
 MAX_COORDINATE_M = 500.0
+#: Longest lidar range (m) a scenario or `husky-sim check --sensing-range-m` takes (beyond it:
+#: leave the range out, unlimited).
+MAX_SENSING_RANGE_M = 1000.0
 #: Most payload (kg) the schema reads at all; the robot's own maximum (specs.yaml) is then checked.
 MAX_PAYLOAD_KG = 1000.0
 #: Scenario names: what a run directory is named after, so no path separators or controls.
@@ -203,18 +217,85 @@ class RandomObstacles(_Strict):
         return self
 
     def specs(self, keep_clear_of: list[tuple[float, float]]) -> list[ObstacleSpec]:
-        rng = np.random.default_rng(self.seed)
-        out: list[ObstacleSpec] = []
-        for _ in range(1000 * self.count):
-            if len(out) == self.count:
+        """The field: candidates (x, y, r) drawn in turn from the seeded generator, each kept when
+        its surface is more than keep_clear_m from every point of `keep_clear_of` (m) and more than
+        RANDOM_GAP_M from every obstacle kept before it, until `count` are kept or 1,000 x count
+        have been drawn (fewer kept: the field cannot be placed). The same seed gives the same
+        field (_random_field: the same decisions as judging one candidate at a time)."""
+        return list(_random_field(self, tuple((float(x), float(y)) for x, y in keep_clear_of)))
+
+
+#: Candidates judged together by _random_field, at first and at most; a block that keeps none
+#: doubles the next (a full field rejects nearly every draw). Draws past the last kept obstacle
+#: are discarded, so the sizes change the time taken, never the field.
+_FIELD_BLOCK = (1024, 65536)
+#: Below this (m) from a threshold a gap worked out by numpy is decided again by the scalar
+#: expression (math.hypot and numpy's hypot may differ in the last bit).
+_TIE_M = 1e-9
+
+
+def _farther(dx: np.ndarray, dy: np.ndarray, less_m: Any, than_m: Any) -> np.ndarray:
+    """math.hypot(dx, dy) - less_m > than_m elementwise (m; arrays or numbers, broadcast): numpy
+    decides, except within _TIE_M of the threshold, where math.hypot does."""
+    dx, dy, less, than = np.broadcast_arrays(dx, dy, less_m, than_m)
+    margin = np.hypot(dx, dy) - less - than
+    out = margin > 0
+    for i in np.flatnonzero(np.abs(margin) <= _TIE_M).tolist():
+        out[i] = math.hypot(dx[i], dy[i]) - less[i] > than[i]
+    return out
+
+
+@functools.lru_cache(maxsize=32)
+def _random_field(field: RandomObstacles, keep: tuple[tuple[float, float], ...]) -> tuple[ObstacleSpec, ...]:
+    """RandomObstacles.specs, worked out once per field and points (validation and building ask
+    for it several times). Candidates are judged a block at a time with numpy (a k-d tree finds
+    the obstacles kept before the block that could be too near), then the block's survivors in
+    turn against those kept within it, with the scalar comparisons wherever numpy's are within
+    _TIE_M of deciding otherwise: the same field as judging each candidate alone, at any count."""
+    from scipy.spatial import cKDTree  # the schema's import stays light without a random field
+
+    rng = np.random.default_rng(field.seed)
+    (x_lo, x_hi), (y_lo, y_hi), (r_lo, r_hi) = field.x_range_m, field.y_range_m, field.radius_range_m
+    clear, count, attempts = field.keep_clear_m, field.count, 1000 * field.count
+    kept = np.empty((count, 3))  # x, y, r (m) of the obstacles kept so far
+    n = drawn = 0
+    size = _FIELD_BLOCK[0]
+    while n < count and drawn < attempts:
+        block = min(size, attempts - drawn)
+        u = rng.random((block, 3))  # as `block` draws of uniform(x), uniform(y), uniform(r)
+        drawn += block
+        xs, ys = x_lo + (x_hi - x_lo) * u[:, 0], y_lo + (y_hi - y_lo) * u[:, 1]
+        rs = r_lo + (r_hi - r_lo) * u[:, 2]
+        ok = np.ones(block, dtype=bool)
+        for px, py in keep:
+            ok &= _farther(xs - px, ys - py, rs, clear)
+        if n:  # against those kept before the block: the nearest first (in a full field, the
+            # nearest refuses nearly every draw), then all within the largest distance that counts
+            tree = cKDTree(kept[:n, :2])
+            xy = np.column_stack([xs, ys])
+            nearest_m, nearest = tree.query(xy)
+            ok &= nearest_m - (rs + kept[nearest, 2] + RANDOM_GAP_M) >= -_TIE_M
+            left = np.flatnonzero(ok)
+            near = tree.query_ball_point(xy[left], rs[left] + r_hi + RANDOM_GAP_M + _TIE_M)
+            lengths = np.fromiter(map(len, near), dtype=int, count=len(left))
+            if lengths.any():
+                cand = np.repeat(left, lengths)
+                other = np.fromiter((j for js in near for j in js), dtype=int, count=int(lengths.sum()))
+                o = kept[other]
+                far = _farther(xs[cand] - o[:, 0], ys[cand] - o[:, 1], 0.0, rs[cand] + o[:, 2] + RANDOM_GAP_M)
+                ok &= np.bincount(cand[~far], minlength=block) == 0
+        start = n  # the block's survivors in turn, against those kept within the block
+        for i in np.flatnonzero(ok).tolist():
+            if n == count:
                 break
-            x, y = rng.uniform(*self.x_range_m), rng.uniform(*self.y_range_m)
-            r = rng.uniform(*self.radius_range_m)
-            if all(math.hypot(x - px, y - py) - r > self.keep_clear_m for px, py in keep_clear_of) and all(
-                math.hypot(x - o.x_m, y - o.y_m) > r + o.radius_m + 0.1 for o in out
-            ):
-                out.append(ObstacleSpec(float(x), float(y), float(r)))
-        return out
+            x, y, r = float(xs[i]), float(ys[i]), float(rs[i])
+            o = kept[start:n]
+            if _farther(x - o[:, 0], y - o[:, 1], 0.0, r + o[:, 2] + RANDOM_GAP_M).all():
+                kept[n] = x, y, r
+                n += 1
+        if n == start:
+            size = min(2 * size, _FIELD_BLOCK[1])
+    return tuple(ObstacleSpec(float(x), float(y), float(r)) for x, y, r in kept[:n])
 
 
 class YawResponseSpec(_Strict):
@@ -327,6 +408,12 @@ class NMPCSpec(_Strict):
     v_max_mps: _real(0.0, 5.0, "m/s", lo_open=True) = NMPCConfig.v_max_mps
     omega_max_radps: _real(0.0, 10.0, "rad/s", lo_open=True) = NMPCConfig.omega_max_radps
     obstacle_prediction: Literal["constant-velocity", "frozen"] = NMPCConfig.obstacle_prediction
+    #: the most obstacles the paper's NLP is built for (NMPCConfig.obstacle_slots: the scenario's
+    #: count up to this); with more, each step's are its nearest by surface distance to the robot
+    #: now (controllers.obstacles: cheap and exact for what is near, though a fast mover still far
+    #: off can lose its slot to near static posts). 16: above every shipped scenario's count, so
+    #: they keep one slot per obstacle; husky-cbf has its own, controller.husky_cbf.slots
+    max_obstacle_slots: _whole(1, MAX_OBSTACLE_SLOTS, "obstacles") = 16
     #: NLP solver (controllers.backends); omitted: the controllers' default (SolverOptions)
     solver: Literal["ipopt", "fatrop"] | None = None
 
@@ -373,13 +460,20 @@ class FrictionSpec(_Strict):
 
 
 class SensingSpec(_Strict):
-    """husky_sim.sim.sensing.SensingConfig: the same fields, its defaults, and their ranges."""
+    """husky_sim.sim.sensing.SensingConfig: the same fields, its defaults, and their ranges;
+    `range_m` omitted (null) is an unlimited range. The defaults see every obstacle."""
 
     pose_xy_std_m: _real(0.0, 5.0, "m") = SensingConfig.pose_xy_std_m
     pose_yaw_std_rad: _real(0.0, math.pi, "rad") = SensingConfig.pose_yaw_std_rad
     obstacle_xy_std_m: _real(0.0, 5.0, "m") = SensingConfig.obstacle_xy_std_m
     latency_steps: _whole(0, 20, "steps") = SensingConfig.latency_steps
     obstacle_velocity_scale: _real(0.0, 5.0) = SensingConfig.obstacle_velocity_scale
+    #: the lidar's range (m); None: unlimited
+    range_m: _real(0.0, MAX_SENSING_RANGE_M, "m", lo_open=True) | None = None
+    #: the lidar's field of view (deg), centred on the robot's heading
+    fov_deg: _real(0.0, 360.0, "deg", lo_open=True) = SensingConfig.fov_deg
+    #: static obstacles hide what lies wholly behind them (husky_sim.sim.sensing.visible_mask)
+    occlusion: bool = SensingConfig.occlusion
 
 
 class SuccessSpec(_Strict):
@@ -597,4 +691,7 @@ def load_scenario(name_or_path: str) -> Scenario:
 
 
 def shipped_scenarios() -> list[Path]:
+    """The scenario files directly in scenarios/, which `suite`, `check` and the test suite run
+    with every controller at every horizon. Its sub-folders (scenarios/large/: worlds of a
+    thousand obstacles) are not among them: run those by path."""
     return sorted(SCENARIO_DIR.glob("*.yaml"))

@@ -54,8 +54,10 @@ def reference_object(sc: Scenario) -> Reference:
 
 def nmpc_config(sc: Scenario) -> NMPCConfig:
     """The scenario's NMPC settings (the paper's part, N and gamma the file's: overrides are
-    applied once, by `with_overrides`), with its robot circle and one obstacle slot per obstacle;
-    each controller sets its own obstacle constraint on it (its registry entry's `configure`)."""
+    applied once, by `with_overrides`), with its robot circle and one obstacle slot per obstacle,
+    at least one and at most `controller.max_obstacle_slots` (more obstacles: the nearest fill
+    them, controllers.obstacles); each controller sets its own obstacle constraint on it (its
+    registry entry's `configure`)."""
     from husky_sim.runs.scenario import NMPC_FIELDS  # the schema imports this module's callers
 
     # the NMPC fields of ControllerSpec are NMPCConfig's by name; `solver` names SolverOptions.backend
@@ -63,11 +65,12 @@ def nmpc_config(sc: Scenario) -> NMPCConfig:
     backend = fields.pop("solver")
     if backend is not None:
         fields["solver"] = SolverOptions(backend=backend)
+    most = fields.pop("max_obstacle_slots")
     return NMPCConfig(
         **fields,
         tau_s=sc.tau_s,
         robot_radius_m=sc.robot.radius(),
-        obstacle_slots=max(len(sc.obstacle_specs()), 1),
+        obstacle_slots=min(max(len(sc.obstacle_specs()), 1), most),
     )
 
 

@@ -16,6 +16,12 @@ clearance is in (0, exact_within_m], a query asks only for closest points below 
 then returns the same distance (bit for bit: the suite's logs are unchanged) with fewer points to
 work out, or none when the body cannot lower it. A penetration is always asked with the full
 threshold: the engine's penetration depths depend on it.
+
+From NUMPY_FROM obstacles on, their bounds are worked out together with numpy (the same
+arithmetic as one at a time, so the same numbers) and only the bodies the walk can reach are
+ordered: those whose bound is within exact_within_m, then the nearest beyond it, whose bound ends
+the walk. A step then costs about 25 us for 1,000 obstacles instead of a Python loop and a sort
+over all of them (about 290 us); below NUMPY_FROM, numpy's call overheads cost more than the loop.
 """
 
 from __future__ import annotations
@@ -26,6 +32,10 @@ from collections.abc import Sequence
 import numpy as np
 
 from husky_sim.sim.bullet import pybullet as p
+
+#: Obstacles from which `smallest` works out their bounds with numpy (fewer: a Python loop, which
+#: is faster there: about 3 us for 8 obstacles against 11 us).
+NUMPY_FROM = 32
 
 
 class ClearanceMonitor:
@@ -50,6 +60,8 @@ class ClearanceMonitor:
         # each wall: its body, inward normal n and offset d (inside where n . p <= d)
         self.walls = [(body, (float(n[0]), float(n[1])), float(d)) for body, n, d in walls]
         self.queries = 0  # getClosestPoints calls made (for the benchmark and tests)
+        self._radii = np.array(self.radii, dtype=float)
+        self._obstacle_ids = np.array(self.bodies, dtype=np.int64)
 
     def smallest(self, robot_xy: Sequence[float], obstacle_xy: np.ndarray, below: float = math.inf) -> float:
         """The smallest clearance (m) of the robot at `robot_xy` to the obstacles (centres
@@ -57,15 +69,22 @@ class ClearanceMonitor:
         at most exact_within_m, else the smallest bound. `below` carries the smallest clearance of
         the physics steps before (a control period's running minimum)."""
         x, y = float(robot_xy[0]), float(robot_xy[1])
-        bounds = []  # (lower bound m, body)
-        for (ox, oy), radius, body in zip(obstacle_xy.tolist(), self.radii, self.bodies, strict=True):
-            dx, dy = ox - x, oy - y
-            bounds.append((math.sqrt(dx * dx + dy * dy) - radius - self.bound, body))
-        for body, (nx, ny), d in self.walls:
-            bounds.append((d - (nx * x + ny * y) - self.bound, body))
-        bounds.sort()  # nearest bound first (ties by body id)
+        if len(self.bodies) < NUMPY_FROM:
+            walk = []  # (lower bound m, body), every body
+            for (ox, oy), radius, body in zip(obstacle_xy.tolist(), self.radii, self.bodies, strict=True):
+                dx, dy = ox - x, oy - y
+                walk.append((math.sqrt(dx * dx + dy * dy) - radius - self.bound, body))
+            for body, (nx, ny), d in self.walls:
+                walk.append((d - (nx * x + ny * y) - self.bound, body))
+            walk.sort()  # nearest bound first (ties by body id)
+        else:
+            centres = np.asarray(obstacle_xy, dtype=float).reshape(-1, 2)
+            if len(centres) != len(self.bodies):
+                raise ValueError(f"obstacle_xy: {len(centres)} centres for {len(self.bodies)} obstacles")
+            dx, dy = centres[:, 0] - x, centres[:, 1] - y
+            walk = self._walk(x, y, np.sqrt(dx * dx + dy * dy) - self._radii - self.bound)
         best = below
-        for lower, body in bounds:
+        for lower, body in walk:
             if lower >= best:
                 break  # this body and all after it are at least `best` away
             if lower > self.exact_within_m:
@@ -80,3 +99,25 @@ class ClearanceMonitor:
             elif not exact_below:  # beyond the reach of any body point within exact_within_m
                 best = min(best, max(lower, self.exact_within_m))
         return best
+
+    def _walk(self, x: float, y: float, bounds: np.ndarray) -> list[tuple[float, int]]:
+        """(bound m, body) of the bodies `smallest` may reach from (x, y) (m), nearest bound first
+        (ties by body id), given the obstacles' bounds (m): every obstacle and wall within
+        exact_within_m, then the nearest beyond it (if it is reached, its bound is the smallest
+        clearance, and every body after it is at least that far)."""
+        inside = bounds <= self.exact_within_m
+        walk = list(zip(bounds[inside].tolist(), self._obstacle_ids[inside].tolist(), strict=True))
+        beyond: tuple[float, int] | None = None
+        if not inside.all():
+            rest = np.where(inside, np.inf, bounds)
+            ties = np.flatnonzero(rest == rest.min())
+            j = int(ties[np.argmin(self._obstacle_ids[ties])])
+            beyond = (float(rest[j]), int(self._obstacle_ids[j]))
+        for body, (nx, ny), d in self.walls:
+            wall = (d - (nx * x + ny * y) - self.bound, body)
+            if wall[0] <= self.exact_within_m:
+                walk.append(wall)
+            elif beyond is None or wall < beyond:
+                beyond = wall
+        walk.sort()
+        return walk if beyond is None else [*walk, beyond]

@@ -18,6 +18,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from husky_sim.sim.collision import ClearanceMonitor
+from husky_sim.sim.contact import Contact, classify, planar_velocity, touched_body
 from husky_sim.sim.drive import SkidSteerDrive
 from husky_sim.sim.robot import SkidSteerRobot
 from husky_sim.sim.robot_description import load_robot
@@ -52,7 +53,7 @@ class PhysicsEnvironment:
             )
             geometry = self.robot.geometry
             self.drive = SkidSteerDrive(config.drive, geometry.wheel_radius_m, geometry.track_width_m, ground)
-            self.sensor = Sensor(config.sensing, config.seed)
+            self.sensor = Sensor(config.sensing, config.seed, [not o.moving for o in config.world.obstacles])
             walls = zip(self.world.wall_ids, self.world.wall_planes, strict=True)
             self.monitor = ClearanceMonitor(
                 self.world.client,
@@ -68,6 +69,8 @@ class PhysicsEnvironment:
         self.substeps = round(config.world.physics_hz * config.tau_s)  # physics steps per control step
         self.footprint_radius_m = self.robot.geometry.footprint_radius_m
         self.obstacle_radii_m = np.array([o.radius_m for o in config.world.obstacles])
+        #: the episode's first contact (husky_sim.sim.contact), recorded once; None before it
+        self.first_contact: Contact | None = None
 
     def pose(self) -> np.ndarray:
         """The true base pose [x m, y m, yaw rad]."""
@@ -90,7 +93,8 @@ class PhysicsEnvironment:
         return self.world.obstacle_centres(t_s)
 
     def measure(self) -> Measurement:
-        """What the controller is told now: the sensor's (noisy, delayed) pose and obstacles."""
+        """What the controller is told now: the sensor's (noisy, delayed) pose and the obstacles
+        its lidar sees from the true base pose (husky_sim.sim.sensing)."""
         return self.sensor.measure(self.robot.pose(), self.world.obstacle_states())
 
     def advance(
@@ -99,19 +103,43 @@ class PhysicsEnvironment:
         """Hold `command` [v m/s, omega rad/s] for one control period through the drive's limits;
         return the last applied (limited) command and the smallest clearance (m) to obstacles and
         walls over its physics steps (inf with neither). `on_physics_step(applied)` is called after
-        every physics step (recorders: it must only read)."""
+        every physics step (recorders: it must only read). The first physics step of the episode
+        whose clearance is <= 0 records `first_contact`, with the speeds going into that step."""
         world, robot, drive = self.world, self.robot, self.drive
         clearance = math.inf
         applied = drive.applied
         checked = bool(world.obstacle_ids or world.wall_ids)
         for _ in range(self.substeps):
+            watching = checked and self.first_contact is None
+            if watching:  # the velocities going into the step, should it be the first contact
+                t_before, velocity = world.time_s, planar_velocity(world.client, robot.body)
             applied = drive.step(robot, command, world.dt_s)
             world.step()
             if on_physics_step is not None:
                 on_physics_step(applied)
             if checked:
                 clearance = self.monitor.smallest(robot.position_xy(), world.obstacle_centres(), clearance)
+                if watching and clearance <= 0.0:
+                    self.first_contact = self._contact(t_before, velocity)
         return applied, clearance
+
+    def _contact(self, t_s: float, robot_velocity_mps: tuple[float, float]) -> Contact:
+        """The first contact, found in the physics step that began at t_s (s): the touched body
+        (husky_sim.sim.contact.touched_body) and the velocities (m/s) going into that step."""
+        world = self.world
+        index = touched_body(
+            world.client,
+            self.robot.body,
+            self.robot.position_xy(),
+            world.obstacle_ids,
+            world.obstacle_centres().tolist(),
+            self.obstacle_radii_m.tolist(),
+            world.wall_ids,
+        )
+        if index is None:
+            return classify(t_s, None, robot_velocity_mps)
+        _, _, vx, vy = world.config.obstacles[index].motion_at(t_s)
+        return classify(t_s, index, robot_velocity_mps, (vx, vy))
 
     def close(self) -> None:
         self.world.close()

@@ -150,7 +150,11 @@ def _run(
 
 
 class _TraceRecorder:
-    """Samples the true base pose and obstacle centres every `every` physics steps (reads only)."""
+    """Samples the true base pose and obstacle centres every `every` physics steps (reads only).
+
+    Only the moving obstacles' centres are sampled; the static ones' stand for every sample. A
+    world with no mover gets its (S, M, 2) centres as a read-only broadcast of the M static ones,
+    so a thousand posts cost no memory per sample (the trace file still holds them all)."""
 
     def __init__(self, robot: SkidSteerRobot, world: World, every: int) -> None:
         self._robot, self._world, self._every = robot, world, every
@@ -158,14 +162,15 @@ class _TraceRecorder:
         self._t: list[float] = []
         self._pos: list[tuple[float, ...]] = []
         self._orn: list[tuple[float, ...]] = []
-        self._obs: list[np.ndarray] = []
+        self._moving = np.array([i for i, o in enumerate(world.config.obstacles) if o.moving], dtype=int)
+        self._obs: list[np.ndarray] = []  # the movers' centres (K, 2) at each sample
         self._take()
 
     def _take(self) -> None:
         """One sample, appended whole: a signal may raise after any PyBullet call, and columns of
         different lengths would make the interrupted run's trace (and its summary) unsavable."""
         pos, orn = self._robot.base_com_pose()
-        t_s, centres = self._world.time_s, self._world.obstacle_centres()  # a fresh array each call
+        t_s, centres = self._world.time_s, self._world.obstacle_centres()[self._moving]  # a fresh array
         with interrupts.deferred():
             self._t.append(t_s)
             self._pos.append(tuple(pos))
@@ -199,7 +204,7 @@ class _TraceRecorder:
             sample_t_s=np.array(self._t),
             base_position_m=np.array(self._pos),
             base_orientation_xyzw=np.array(self._orn),
-            obstacle_xy_m=np.array(self._obs).reshape(len(self._t), len(specs), 2),
+            obstacle_xy_m=self._obstacle_xy(len(self._t)),
             obstacle_radius_m=np.array([o.radius_m for o in specs]),
             obstacle_height_m=np.array([o.height_m for o in specs]),
             control_t_s=np.array([float(r["t_s"]) for r in rows]),
@@ -210,3 +215,14 @@ class _TraceRecorder:
             footprint_radius_m=float(footprint_radius_m),
             arena_half_size_m=float("nan") if arena is None else float(arena),
         )
+
+    def _obstacle_xy(self, samples: int) -> np.ndarray:
+        """(samples, M, 2) true obstacle centres (m): the static ones where the world placed
+        them, the movers' as sampled."""
+        static = self._world.obstacle_centres(0.0)  # a fresh array: statics are where they began
+        shape = (samples, len(static), 2)
+        if not len(self._moving):
+            return np.broadcast_to(static, shape)
+        xy = np.repeat(static[None], samples, axis=0)
+        xy[:, self._moving] = np.array(self._obs).reshape(samples, len(self._moving), 2)
+        return xy

@@ -7,7 +7,11 @@ Husky; what differs is said here. Obstacles move at constant velocity and are se
 robot is the controller's circle, and clearance is measured on the circle model at the end of each
 step. The paper's rules for this loop: it runs its full time unless the set-point is held (a
 collision does not end it; the stuck rule is judged once, at the end, on the last commands), and a
-clearance above -KINEMATIC_CONTACT_TOL_M is contact, not collision.
+clearance above -KINEMATIC_CONTACT_TOL_M is contact, not collision. The sensing model
+(husky_sim.sim.sensing) is not applied: every obstacle is reported visible. The first collision
+is classified as the PyBullet plant's first contact (husky_sim.sim.contact), on the circle model:
+at the first step end whose clearance is below -KINEMATIC_CONTACT_TOL_M, the nearest circle, the
+commanded speed going into that step and the obstacle's constant velocity.
 """
 
 from __future__ import annotations
@@ -20,6 +24,7 @@ import numpy as np
 from controllers import Controller, Obstacle, Reference
 from controllers.model import step, wrap_angle
 from husky_sim.interrupts import RunInterrupted
+from husky_sim.sim.contact import Contact, classify
 from husky_sim.sim.metrics import count_reversals
 from husky_sim.sim.outcomes import OutcomeMonitor, Outcomes
 from husky_sim.sim.rollout import control_steps, rollout
@@ -125,6 +130,8 @@ class KinematicEnvironment:
         self.footprint_radius_m = robot_radius_m
         self.obstacle_radii_m = np.array([o.radius_m for o in self._obstacles])
         self.initial_clearance_m = clearance(self._state, obstacles_at(self._obstacles, 0.0), robot_radius_m)
+        #: the first collision (husky_sim.sim.contact), recorded once; None before it
+        self.first_contact: Contact | None = None
 
     def pose(self) -> np.ndarray:
         return self._state
@@ -139,8 +146,9 @@ class KinematicEnvironment:
         return np.full(2, np.nan)
 
     def measure(self) -> Measurement:
-        """The exact state and the obstacles at the current time."""
-        return Measurement(self._state, obstacles_at(self._obstacles, self._k * self.tau_s))
+        """The exact state and every obstacle at the current time (all visible)."""
+        obstacles = obstacles_at(self._obstacles, self._k * self.tau_s)
+        return Measurement(self._state, obstacles, tuple(range(len(obstacles))))
 
     def obstacle_centres(self, t_s: float) -> np.ndarray:
         return np.array([o.position_after(t_s) for o in self._obstacles], dtype=float).reshape(-1, 2)
@@ -148,15 +156,27 @@ class KinematicEnvironment:
     def advance(
         self, command: np.ndarray, on_physics_step: Callable[[np.ndarray], None] | None = None
     ) -> tuple[np.ndarray, float]:
-        """One RK4 step of tau_s; the clearance is the circle model's at the step's end."""
+        """One RK4 step of tau_s; the clearance is the circle model's at the step's end, and the
+        first end below -KINEMATIC_CONTACT_TOL_M records `first_contact`."""
         t = self._k * self.tau_s
+        yaw = float(self._state[2])
         self._state = step(self._state, command, self.tau_s)
         self._command = command
         self._k += 1
         if on_physics_step is not None:
             on_physics_step(command)
         t_next = t + self.tau_s
-        return command, clearance(self._state, obstacles_at(self._obstacles, t_next), self.footprint_radius_m)
+        circles = obstacles_at(self._obstacles, t_next)
+        gap = clearance(self._state, circles, self.footprint_radius_m)
+        if self.first_contact is None and gap < -KINEMATIC_CONTACT_TOL_M:
+            gaps = [clearance(self._state, [o], self.footprint_radius_m) for o in circles]
+            index = int(np.argmin(gaps))
+            v = float(command[0])
+            touched = circles[index]
+            self.first_contact = classify(
+                t_next, index, (v * np.cos(yaw), v * np.sin(yaw)), (touched.vx_mps, touched.vy_mps)
+            )
+        return command, gap
 
 
 def run_kinematic(

@@ -201,6 +201,10 @@ class EpisodeMetrics:
     footprint_radius_m: float
     robot_radius_below_footprint: bool  # the controller's circle is smaller than the real body
     interrupted_by: str | None = None  # "SIGINT" / "SIGTERM" when outcome is "interrupted"
+    # the first contact of a collided episode (husky_sim.sim.contact); all None without a collision
+    collision_at_fault: bool | None = None  # the robot moved faster than AT_FAULT_SPEED_MPS into it
+    collision_obstacle: int | None = None  # index of the obstacle touched; None for a wall
+    collision_relative_speed_mps: float | None = None  # |robot velocity - touched body's velocity|
 
     def as_dict(self) -> dict[str, object]:
         return asdict(self)
@@ -236,6 +240,7 @@ def summarise(
     clearance = col["clearance_m"].astype(float)
     min_clear = float(np.min(clearance)) if np.any(np.isfinite(clearance)) else None  # None: no obstacles
     collided = min_clear is not None and min_clear <= 0.0
+    contact = record.first_contact if collided else None  # a contact after the last row is not judged
     outcome = final_outcome(
         monitor.outcome, collided=collided, is_setpoint=is_setpoint, interrupted=interrupted_by is not None
     )
@@ -306,4 +311,7 @@ def summarise(
         footprint_radius_m=footprint_radius_m,
         robot_radius_below_footprint=robot_radius_m is not None and robot_radius_m < footprint_radius_m,
         interrupted_by=None if interrupted_by is None else signal.Signals(interrupted_by).name,
+        collision_at_fault=None if contact is None else contact.at_fault,
+        collision_obstacle=None if contact is None else contact.obstacle,
+        collision_relative_speed_mps=None if contact is None else contact.relative_speed_mps,
     )

@@ -23,9 +23,10 @@ from controllers import Controller, ControlResult, Reference
 from controllers.model import wrap_angle
 from husky_sim import interrupts
 from husky_sim.interrupts import RunInterrupted
+from husky_sim.sim.contact import Contact
 from husky_sim.sim.outcomes import OutcomeMonitor, ReferenceBlockage, reference_reachable
 from husky_sim.sim.sensing import Measurement
-from husky_sim.sim.step_log import StepLog
+from husky_sim.sim.step_log import StepLog, format_visible
 
 
 class Plant(Protocol):
@@ -36,6 +37,8 @@ class Plant(Protocol):
     footprint_radius_m: float
     #: the obstacles' radii (m), in the order of `obstacle_centres`
     obstacle_radii_m: np.ndarray
+    #: the episode's first contact (husky_sim.sim.contact) once it happened, else None
+    first_contact: Contact | None
 
     def pose(self) -> np.ndarray:
         """The true pose [x m, y m, yaw rad] now."""
@@ -87,8 +90,9 @@ def control_steps(duration_s: float, tau_s: float) -> int:
 @dataclass
 class Rollout:
     """What one rollout recorded: a row per control step of tau_s (s) (step_log.LOG_COLUMNS), the
-    plan of each step (N+1, 3), the monitor that judged it, the pose after the last step and the
-    signal that ended it early (None: it ran to its end or the monitor stopped it)."""
+    plan of each step (N+1, 3), the monitor that judged it, the pose after the last step, the
+    signal that ended it early (None: it ran to its end or the monitor stopped it) and the
+    plant's first contact (None: none happened)."""
 
     tau_s: float
     rows: list[dict[str, object]]
@@ -96,6 +100,7 @@ class Rollout:
     monitor: OutcomeMonitor
     final_pose: np.ndarray
     interrupted_by: int | None
+    first_contact: Contact | None = None
 
 
 def rollout(
@@ -144,6 +149,7 @@ def rollout(
                 ref_now[:2], centres, plant.obstacle_radii_m, plant.footprint_radius_m
             )
             row = _row(k, t, pose, body, wheels, currents, ref_now, command, applied, clearance, reachable)
+            row["visible_obstacles"] = format_visible(measurement.visible)  # what the controller got
             row.update(_solve_columns(result, deadline_miss))
             with interrupts.deferred():  # a row is written whole or not at all
                 if log is not None:
@@ -167,7 +173,7 @@ def rollout(
         monitor.finish(rows)
     else:
         monitor.outcome = "interrupted"
-    return Rollout(tau_s, rows, plans, monitor, plant.pose(), interrupted_by)
+    return Rollout(tau_s, rows, plans, monitor, plant.pose(), interrupted_by, plant.first_contact)
 
 
 def _row(

@@ -15,6 +15,7 @@ from pathlib import Path
 #: obstacle's circle at t_s inflated by the footprint radius; outcomes.reference_reachable), and
 #: the solve's slacks, activity, status and wall time; `repeated` is 1 where the step ran no solver,
 #: every problem it posed having been answered before, bit for bit (controllers.backends.repeats).
+#: `visible_obstacles` lists the obstacles the controller was told of at t_s (format_visible).
 LOG_COLUMNS = (
     "step",
     "t_s",
@@ -38,6 +39,7 @@ LOG_COLUMNS = (
     "motor_right_a",
     "clearance_m",
     "ref_reachable",
+    "visible_obstacles",
     "s_h_min",
     "s_v_max",
     "safety_active",
@@ -56,6 +58,28 @@ LOG_COLUMNS = (
 )
 #: Columns whose values are wall-clock measurements (excluded from determinism comparisons).
 WALL_CLOCK_COLUMNS = ("solve_ms",)
+
+
+#: Between the indices of `visible_obstacles`.
+VISIBLE_SEPARATOR = ";"
+
+
+def format_visible(indices: Sequence[int]) -> str:
+    """The `visible_obstacles` column: the indices (in the scenario's obstacle order) of the
+    obstacles the controller was told of, ascending, joined by ";" ("0;2;5"; "" for none). With
+    sensing latency they are those seen latency_steps before (husky_sim.sim.sensing)."""
+    return VISIBLE_SEPARATOR.join(str(int(i)) for i in indices)
+
+
+def parse_visible(value: object) -> tuple[int, ...]:
+    """The indices of a `visible_obstacles` value, as written or as read back by a CSV reader
+    that made a number of a lone index ("3", 3.0) or NaN of an empty cell."""
+    if isinstance(value, float):
+        return () if value != value else (int(value),)
+    if isinstance(value, int):
+        return (int(value),)
+    text = str(value).strip()
+    return tuple(int(float(part)) for part in text.split(VISIBLE_SEPARATOR)) if text else ()
 
 
 class StepLog:
