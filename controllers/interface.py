@@ -51,6 +51,9 @@ class ControlResult:
     #: the deadlock escape's phase this step ("" when none; husky-cbf's escape.py): the
     #: controller found itself making no progress and follows a recovery waypoint
     escape: str = ""
+    #: a safety filter replaced the controller's command with its backup (husky-cbf's
+    #: safety_filter.py): the command's braking manoeuvre was predicted to touch an obstacle
+    filtered: bool = False
 
     @property
     def is_fallback(self) -> bool:

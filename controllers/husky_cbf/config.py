@@ -285,6 +285,12 @@ class HuskyCBFConfig:
     #: the nearest obstacles in the NLP (at most; fewer when the scenario has fewer): each slot
     #: adds a constraint per body disc and step to the OCP
     slots: int = setting(6, 1, 64)
+    #: the safety filter (safety_filter.py): a command is sent only if braking to a stop after it
+    #: keeps every body disc clear of every obstacle until the robot stands; else the backup
+    safety_filter: bool = True
+    #: the filter's bound on how fast a mover changes its velocity (m/s^2): its circle grows by
+    #: half this times the squared time since it was measured
+    mover_accel_bound_mps2: float = setting(0.5, 0.0, 10.0, "m/s^2")
     guidance: GuidanceConfig = field(default_factory=GuidanceConfig)
     escape: EscapeConfig = field(default_factory=EscapeConfig)
 

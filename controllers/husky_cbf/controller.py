@@ -46,6 +46,7 @@ from controllers.husky_cbf.guidance import (
 from controllers.husky_cbf.localisation import PoseFilter
 from controllers.husky_cbf.model import extended_step
 from controllers.husky_cbf.ocp import ExtendedPlan, Layout, pack_parameters, solver_for
+from controllers.husky_cbf.safety_filter import SafetyFilter
 from controllers.husky_cbf.turn_monitor import TurnMonitor
 from controllers.interface import ControlResult
 from controllers.model import wrap_angle
@@ -97,6 +98,18 @@ class HuskyCBFController:
         self._plan_start_s = max(self._pipe.delay_s - config.sensing_latency_s, 0.0)
         self._pose_filter = PoseFilter(config.pose_noise, base.tau_s)
         self._turns = TurnMonitor(round(config.weak_turn_window_s / base.tau_s), config.weak_turn_min_rad)
+        self._filter = (
+            SafetyFilter(
+                config.response,
+                base.tau_s,
+                self._discs,
+                self._disc_radius,
+                config.mover_accel_bound_mps2,
+                config.measurement_delay_s,
+            )
+            if config.safety_filter
+            else None
+        )
         self.reset()
 
     @property
@@ -479,6 +492,10 @@ class HuskyCBFController:
         plan = ExtendedPlan.from_vector(raw.decision, layout)
         self._plan = plan
         command = plan.states[1, 3:5].copy()
+        filtered = False
+        if self._filter is not None:
+            verdict = self._filter.filter(z0, command, obstacles)
+            command, filtered = verdict.command, verdict.intervened
         self._advance(pose, omega_now, command)
         barriers = self._barriers(plan, p, layout, n_real)
         residual = barriers[:, 1:] - plan.decay_slack * (1.0 - base.gamma) * barriers[:, :-1]
@@ -504,6 +521,7 @@ class HuskyCBFController:
             solver_fallback="; ".join(dict.fromkeys(self._solver_fallbacks)),
             plan_start_s=self._plan_start_s,
             escape=self._escape.phase,
+            filtered=filtered,
         )
 
     def _barriers(self, plan: ExtendedPlan, p: np.ndarray, layout: Layout, n_real: int) -> np.ndarray:

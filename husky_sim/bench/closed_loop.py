@@ -163,21 +163,9 @@ def run_sim_bench(
     result = run_episode(nmpc, SetPoint(0.0, 10.0, math.pi / 2), config, robot_radius_m=0.65)
     episode_wall = time.perf_counter() - t0
 
-    walls = []
-    command = np.array([0.5, 0.1])
-    with PhysicsEnvironment(config) as env:  # bare: the drive and the physics, no clearance check
-        world, robot, drive, periods = env.world, env.robot, env.drive, stepping_steps // env.substeps
-        stepping_steps = periods * env.substeps  # whole control periods, for the checked loop
-        t0 = time.perf_counter()
-        for _ in range(stepping_steps):
-            drive.step(robot, command, world.dt_s)
-            world.step()
-        walls.append(time.perf_counter() - t0)
-    with PhysicsEnvironment(config) as env:  # checked: the episode's own physics loop
-        t0 = time.perf_counter()
-        for _ in range(periods):
-            env.advance(command)
-        walls.append(time.perf_counter() - t0)
+    stepping = time_physics_steps(config, stepping_steps)
+    walls = [stepping.bare_wall_s, stepping.checked_wall_s]
+    stepping_steps = stepping.steps
     peak_mb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
     return SimBench(
         result.metrics.sim_time_s,
@@ -189,6 +177,38 @@ def run_sim_bench(
         walls[1],
         peak_mb,
     )
+
+
+@dataclass(frozen=True)
+class PhysicsStepping:
+    """Physics stepping timed in one world: `steps` physics steps (whole control periods) bare
+    (the drive and the engine) and checked (the episode's own loop, with the clearance check), in s."""
+
+    steps: int
+    bare_wall_s: float
+    checked_wall_s: float
+    checked_cpu_s: float
+
+
+def time_physics_steps(config: EpisodeConfig, steps: int) -> PhysicsStepping:
+    """About `steps` physics steps (rounded to whole control periods, at least one) of a fixed
+    command, timed bare and checked, each in a fresh world of `config`."""
+    command = np.array([0.5, 0.1])
+    with PhysicsEnvironment(config) as env:  # bare: the drive and the physics, no clearance check
+        world, robot, drive = env.world, env.robot, env.drive
+        periods = max(steps // env.substeps, 1)
+        steps = periods * env.substeps
+        t0 = time.perf_counter()
+        for _ in range(steps):
+            drive.step(robot, command, world.dt_s)
+            world.step()
+        bare = time.perf_counter() - t0
+    with PhysicsEnvironment(config) as env:  # checked: the episode's own physics loop
+        t0, c0 = time.perf_counter(), time.process_time()
+        for _ in range(periods):
+            env.advance(command)
+        checked, checked_cpu = time.perf_counter() - t0, time.process_time() - c0
+    return PhysicsStepping(steps, bare, checked, checked_cpu)
 
 
 @dataclass(frozen=True)
@@ -267,23 +287,9 @@ def run_large_world_bench(
     episode_wall, episode_cpu = time.perf_counter() - t0, time.process_time() - c0
     solve_ms = np.array([float(row["solve_ms"]) for row in result.rows])
 
-    command = np.array([0.5, 0.1])
-    walls = []
-    with PhysicsEnvironment(config) as env:  # bare: the drive and the physics, no clearance check
-        world, robot, drive = env.world, env.robot, env.drive
-        periods = max(stepping_steps // env.substeps, 1)
-        stepping_steps = periods * env.substeps
-        t0 = time.perf_counter()
-        for _ in range(stepping_steps):
-            drive.step(robot, command, world.dt_s)
-            world.step()
-        walls.append(time.perf_counter() - t0)
-    with PhysicsEnvironment(config) as env:  # checked: the episode's own physics loop
-        t0, c0 = time.perf_counter(), time.process_time()
-        for _ in range(periods):
-            env.advance(command)
-        walls.append(time.perf_counter() - t0)
-        checked_cpu = time.process_time() - c0
+    stepping = time_physics_steps(config, stepping_steps)
+    walls = [stepping.bare_wall_s, stepping.checked_wall_s]
+    stepping_steps, checked_cpu = stepping.steps, stepping.checked_cpu_s
     return LargeWorldBench(
         scenario=sc.name,
         controller=controller,

@@ -283,6 +283,7 @@ class SearchSummary:
     method: str
     runs: int
     first_collision_run: int | None  # 1-based
+    first_at_fault_run: int | None  # the first collision while moving
     first_failure_run: int | None  # any class but reached (infeasible draws excluded)
     lowest_clearance_m: float | None
     best_score: float
@@ -297,7 +298,28 @@ def summarise(s: Search) -> SearchSummary:
         s.history[0].method if s.history else "",
         len(s.history),
         first(lambda e: e.run_class in ("collision_at_fault", "hit_standing")),
+        first(lambda e: e.run_class == "collision_at_fault"),
         first(lambda e: e.run_class not in ("reached", "infeasible")),
         min(clearances) if clearances else None,
         min((e.score for e in s.history), default=INFEASIBLE_SCORE),
     )
+
+
+def comparison_table(
+    family: str, controller: str, horizon: int | None, searches: Sequence[tuple[SearchSummary, Path]]
+) -> str:
+    """A Markdown table of searches of one family and controller: a row per method."""
+    lines = [
+        "| family | controller | method | runs | first failure (run) | first collision (run) "
+        "| first at-fault collision (run) | lowest clearance (m) | worst layout |",
+        "|---|---|---|---|---|---|---|---|---|",
+    ]
+    label = controller if horizon is None else f"{controller}, N = {horizon}"
+    for m, out in searches:
+        lowest = "n/a" if m.lowest_clearance_m is None else f"{m.lowest_clearance_m:.3f}"
+        lines.append(
+            f"| {family} | {label} | {m.method} | {m.runs} | {m.first_failure_run or '-'} | "
+            f"{m.first_collision_run or '-'} | {m.first_at_fault_run or '-'} | {lowest} | "
+            f"`{out / 'worst.yaml'}` |"
+        )
+    return "\n".join(lines)

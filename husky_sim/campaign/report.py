@@ -13,6 +13,7 @@ import numpy as np
 
 from husky_sim.campaign.runner import CSV_FILE, CampaignSpec, RunTask
 from husky_sim.campaign.stats import CLASSES, CONFIDENCE, FAILURES, rate_text, upper_bound
+from husky_sim.paths import DEFAULT_ROBOT
 from husky_sim.runs.run_folder import read_log
 from husky_sim.runs.scenario import load_scenario
 from husky_sim.scenario_file import read_scenario_data, scenario_yaml
@@ -44,6 +45,8 @@ def command_line(spec: CampaignSpec, out_dir: Path) -> str:
         parts.append(f"--horizon {spec.horizon}")
     for k, v in spec.fixed.items():
         parts.append(f"--param {k}={v:g}")
+    if spec.robot != DEFAULT_ROBOT:
+        parts.append(f"--robot {spec.robot}")
     parts.append(f"--out {out_dir}")
     return " ".join(parts)
 
@@ -64,10 +67,14 @@ def write_report(
         "",
         f"{len(rows)} runs of {len(tasks)}; {spec.count} layouts per family, seed {spec.seed}. Each failure "
         f"rate is `failures/runs (rate, <= its exact one-sided {CONFIDENCE:.0%} upper bound)` "
-        "(Clopper-Pearson).",
+        "(Clopper-Pearson). `filtered runs`: runs in which a safety filter replaced at least one "
+        "command with its braking backup; `solve p99`: the median over the runs of each run's 99th "
+        "percentile solve time (wall clock, this machine).",
         "",
-        "| family | runs | reached | " + " | ".join(c.replace("_", " ") for c in FAILURES) + " |",
-        "|---|---|---|" + "---|" * len(FAILURES),
+        "| family | runs | reached | "
+        + " | ".join(c.replace("_", " ") for c in FAILURES)
+        + " | filtered runs | solve p99 (median, ms) |",
+        "|---|---|---|" + "---|" * len(FAILURES) + "---|---|",
     ]
     families = list(dict.fromkeys(t.family for t in tasks))
     for name in [*families, "all"]:
@@ -77,7 +84,10 @@ def write_report(
         reached = f"{counts['reached']}/{n} ({100 * counts['reached'] / n:.0f} %)" if n else "0/0"
         cells = [rate_text(counts[c], n) if counts[c] else "0" for c in FAILURES]
         label = f"**{name}**" if name == "all" else name
-        lines.append(f"| {label} | {n} | {reached} | " + " | ".join(cells) + " |")
+        filtered = sum(_number(r.get("filter_interventions")) > 0 for r in chosen)
+        p99 = [_number(r.get("solve_ms_p99")) for r in chosen if r.get("solve_ms_p99") not in (None, "")]
+        p99_text = f"{np.median(p99):.1f}" if p99 else "n/a"
+        lines.append(f"| {label} | {n} | {reached} | " + " | ".join(cells) + f" | {filtered} | {p99_text} |")
     lines += [
         "",
         f"A class with no failure in a family shows 0: with {spec.count} runs that bounds its rate at "
@@ -102,6 +112,14 @@ def write_report(
     report = out_dir / REPORT_FILE
     report.write_text("\n".join(lines) + "\n")
     return report
+
+
+def _number(value: object) -> float:
+    """A number of a row (campaign.csv holds strings; a missing value is 0)."""
+    try:
+        return float(value)  # type: ignore[arg-type]
+    except (TypeError, ValueError):
+        return 0.0
 
 
 def save_failure(task: RunTask, row: Mapping[str, object], out_dir: Path) -> Path:

@@ -20,6 +20,7 @@ from pathlib import Path
 from husky_sim.campaign.stats import run_class
 from husky_sim.families.generate import Layout, generate
 from husky_sim.families.registry import family
+from husky_sim.paths import DEFAULT_ROBOT
 from husky_sim.runs.parallel import Backend, parallel_map
 from husky_sim.runs.run_folder import SUMMARY_FILE, prepare_out_dir, write_summary
 
@@ -41,6 +42,7 @@ CSV_COLUMNS = (
     "min_clearance_m",
     "time_to_goal_s",
     "solve_ms_p99",
+    "filter_interventions",
     "params",
 )
 #: Outcomes that a restart runs again (the run did not finish).
@@ -50,7 +52,8 @@ UNFINISHED = ("interrupted",)
 @dataclass(frozen=True)
 class CampaignSpec:
     """What a campaign runs: `count` layouts (indices 0 .. count-1 of `seed`) of each family, with
-    `controller` at `horizon` (None: each layout's own), some family parameters fixed."""
+    `controller` at `horizon` (None: each layout's own), some family parameters fixed, for the
+    robot folder `robot` (the layouts' body and feasibility are its)."""
 
     families: tuple[str, ...]
     controller: str
@@ -58,6 +61,7 @@ class CampaignSpec:
     seed: int
     horizon: int | None = None
     fixed: Mapping[str, float] = field(default_factory=dict)
+    robot: str = DEFAULT_ROBOT
 
     def __post_init__(self) -> None:
         if not self.families:
@@ -101,7 +105,7 @@ def campaign_layouts(spec: CampaignSpec) -> list[Layout]:
     return [
         layout
         for name in spec.families
-        for layout in generate(name, spec.count, spec.seed, spec.fixed_for(name))
+        for layout in generate(name, spec.count, spec.seed, spec.fixed_for(name), spec.robot)
     ]
 
 
@@ -183,6 +187,7 @@ def row_of(task: RunTask, summary: Mapping[str, object]) -> dict[str, object]:
         "min_clearance_m": _rounded(summary.get("min_clearance_m")),
         "time_to_goal_s": _rounded(summary.get("time_to_goal_s")),
         "solve_ms_p99": _rounded(summary.get("solve_ms_p99")),
+        "filter_interventions": summary.get("filter_interventions"),
         "params": task.params,
     }
     return row

@@ -17,7 +17,7 @@ from husky_sim.cli.common import (
     path_arg,
     seed_arg,
 )
-from husky_sim.cli.families import add_param_arg
+from husky_sim.cli.families import add_param_arg, add_robot_arg
 
 
 def _jobs(args: argparse.Namespace) -> int:
@@ -33,7 +33,13 @@ def cmd_campaign(args: argparse.Namespace) -> int:
     from husky_sim.campaign.runner import CampaignSpec, plan, run_campaign
 
     spec = CampaignSpec(
-        tuple(args.families), args.controller, args.count, args.seed, args.horizon, dict(args.param)
+        tuple(args.families),
+        args.controller,
+        args.count,
+        args.seed,
+        args.horizon,
+        dict(args.param),
+        args.robot,
     )
     out = Path(args.out)
     interrupts.begin_run()
@@ -49,11 +55,11 @@ def cmd_campaign(args: argparse.Namespace) -> int:
 def cmd_falsify(args: argparse.Namespace) -> int:
     from pathlib import Path
 
-    from husky_sim.campaign.falsify import search, summarise
+    from husky_sim.campaign.falsify import comparison_table, search, summarise
 
     interrupts.begin_run()
     methods = ["cma", "random"] if args.method == "both" else [args.method]
-    lines = []
+    rows = []
     for method in methods:
         out = Path(args.out) / method if len(methods) > 1 else Path(args.out)
         s = search(
@@ -70,13 +76,10 @@ def cmd_falsify(args: argparse.Namespace) -> int:
             args.scheduler,
             log=print,
         )
-        m = summarise(s)
-        lowest = "n/a" if m.lowest_clearance_m is None else f"{m.lowest_clearance_m:.3f} m"
-        lines.append(
-            f"{method}: {m.runs} runs, first collision at run {m.first_collision_run or '-'}, first failure "
-            f"at run {m.first_failure_run or '-'}, lowest clearance {lowest} -> {out / 'worst.yaml'}"
-        )
-    print("\n".join(lines))
+        rows.append((summarise(s), out))
+    table = comparison_table(args.family, args.controller, args.horizon, rows)
+    (Path(args.out) / "falsify.md").write_text(table + "\n")
+    print(table)
     return 0
 
 
@@ -95,6 +98,7 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
         "--horizon", type=horizon_arg, default=None, help=f"{HORIZON_HELP} (default: the layouts')"
     )
     add_param_arg(campaign)
+    add_robot_arg(campaign)
     campaign.add_argument("--jobs", type=jobs_arg, default=None, help="worker processes (default: all cores)")
     add_backend_args(campaign, "runs")
     campaign.add_argument("--quiet", action="store_true", help="no progress bar")

@@ -31,6 +31,18 @@ def add_param_arg(parser: argparse.ArgumentParser) -> None:
     )
 
 
+def add_robot_arg(parser: argparse.ArgumentParser) -> None:
+    from husky_sim.paths import DEFAULT_ROBOT
+    from husky_sim.sim.robot_description import robot_names
+
+    parser.add_argument(
+        "--robot",
+        choices=robot_names(),
+        default=DEFAULT_ROBOT,
+        help=f"the robot folder whose body sizes and checks the layouts (default {DEFAULT_ROBOT})",
+    )
+
+
 def cmd_families(args: argparse.Namespace) -> int:
     from husky_sim.families.registry import family, family_names
 
@@ -63,7 +75,7 @@ def cmd_generate(args: argparse.Namespace) -> int:
     from husky_sim.runs.run_folder import prepare_out_dir
 
     fixed = dict(args.param)
-    layouts = generate(args.family, args.count, args.seed, fixed)
+    layouts = generate(args.family, args.count, args.seed, fixed, args.robot)
     out = prepare_out_dir(Path(args.out))
     for layout in layouts:
         layout.write(out)
@@ -90,6 +102,7 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
     generate.add_argument("--count", type=count_arg, default=10, help="layouts K >= 1 (default 10)")
     generate.add_argument("--seed", type=seed_arg, default=0, help="seed >= 0 (default 0)")
     add_param_arg(generate)
+    add_robot_arg(generate)
     generate.add_argument("--out", type=path_arg, required=True, help="folder for the scenario files")
     generate.add_argument("--plot", action="store_true", help="also a gallery of the layouts (PNG, SVG)")
     generate.set_defaults(func=cmd_generate)

@@ -25,8 +25,10 @@ CONTROLLER_MARGIN_M = 0.25
 #: The speed (m/s) a family assumes the robot makes good along its way when it times a mover to
 #: meet it: below the drive's 1 m/s, about what the NMPCs average among obstacles.
 NOMINAL_SPEED_MPS = 0.6
-#: Obstacle height (m): person-sized and post-sized cylinders alike (a 2-D lidar sees them all).
-OBSTACLE_HEIGHT_M = 1.0
+#: A walker's radius (m): a person with swinging arms.
+WALKER_RADIUS_M = 0.3
+#: A wall post's radius (m); `Draw.wall` sets posts 0.1 m apart, too narrow for any robot.
+POST_RADIUS_M = 0.15
 
 
 @dataclass(frozen=True)
@@ -118,7 +120,11 @@ class Draw:
         )
 
     def wall(
-        self, a: tuple[float, float], b: tuple[float, float], post_radius_m: float = 0.15, gap_m: float = 0.1
+        self,
+        a: tuple[float, float],
+        b: tuple[float, float],
+        post_radius_m: float = POST_RADIUS_M,
+        gap_m: float = 0.1,
     ) -> None:
         """A wall of static posts from a to b (m): cylinders of post_radius_m whose surfaces are
         gap_m apart, too narrow for any robot, so the wall blocks as a solid one would."""

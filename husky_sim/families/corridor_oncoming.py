@@ -1,18 +1,25 @@
 """A corridor with oncoming walkers: an L-shaped corridor walled with posts, the goal round the
-corner, and one or two walkers coming the other way, keeping to their right, through the
-corner and down the robot's leg. The corridor is wide enough for the body beside a walker only
-when its width margin allows; otherwise the robot must give way where it can."""
+corner, and one or two walkers coming the other way through the corner and down the robot's leg,
+keeping to one side (their right where the corridor turns left). The corridor is wide enough for
+the body beside a walker only when its width margin allows; otherwise the robot must give way
+where it can."""
 
 from __future__ import annotations
 
 import math
 from typing import Any
 
-from husky_sim.families.base import Draw, Family, Param, pose, set_point_scenario, travel_duration_s
+from husky_sim.families.base import (
+    POST_RADIUS_M,
+    WALKER_RADIUS_M,
+    Draw,
+    Family,
+    Param,
+    pose,
+    set_point_scenario,
+    travel_duration_s,
+)
 from husky_sim.families.registry import register
-
-POST_RADIUS_M = 0.15
-WALKER_RADIUS_M = 0.3
 
 
 def build(d: Draw) -> dict[str, Any]:
@@ -30,7 +37,7 @@ def build(d: Draw) -> dict[str, Any]:
     d.wall(m(leg1 + h + pr, outer_y), m(leg1 + h + pr, leg2 + 1.0), pr)
     d.wall(m(-2.0, inner_y), m(leg1 - h - pr, inner_y), pr)
     d.wall(m(leg1 - h - pr, inner_y), m(leg1 - h - pr, leg2 + 1.0), pr)
-    keep = h - WALKER_RADIUS_M - 0.1  # walkers keep to their right
+    keep = h - WALKER_RADIUS_M - 0.1  # walkers keep to one side
     for k in range(int(d["walkers"])):
         speed = d["walker_speed_mps"] * d.uniform(0.8, 1.0)
         start_along = leg2 + 1.5 + k * d.uniform(2.0, 5.0)
@@ -58,7 +65,7 @@ FAMILY = register(
             Param("walker_speed_mps", 0.3, 1.2, "m/s", "walking speed (each 80 to 100 % of it)"),
         ),
         guarantees="the corridor is at least the body's circumscribed diameter plus 0.5 m wide; "
-        "walkers keep to their right, leaving the other side, so the robot can pass by standing "
+        "walkers keep to one side, leaving the other, so the robot can pass by standing "
         "aside where the width margin allows",
         build=build,
     )

@@ -9,6 +9,7 @@ from typing import Any
 
 from husky_sim.families.base import (
     NOMINAL_SPEED_MPS,
+    WALKER_RADIUS_M,
     Draw,
     Family,
     Param,
@@ -18,9 +19,6 @@ from husky_sim.families.base import (
     turning_path,
 )
 from husky_sim.families.registry import register
-
-#: A walker's radius (m): a person with swinging arms.
-WALKER_RADIUS_M = 0.3
 
 
 def build(d: Draw) -> dict[str, Any]:

@@ -8,6 +8,7 @@ from typing import Any
 
 from husky_sim.families.base import (
     NOMINAL_SPEED_MPS,
+    WALKER_RADIUS_M,
     Draw,
     Family,
     Param,
@@ -17,8 +18,6 @@ from husky_sim.families.base import (
     turning_path,
 )
 from husky_sim.families.registry import register
-
-WALKER_RADIUS_M = 0.3
 
 
 def build(d: Draw) -> dict[str, Any]:

@@ -7,10 +7,17 @@ from __future__ import annotations
 import math
 from typing import Any
 
-from husky_sim.families.base import Draw, Family, Param, heading, pose, set_point_scenario, travel_duration_s
+from husky_sim.families.base import (
+    POST_RADIUS_M,
+    Draw,
+    Family,
+    Param,
+    heading,
+    pose,
+    set_point_scenario,
+    travel_duration_s,
+)
 from husky_sim.families.registry import register
-
-POST_RADIUS_M = 0.15
 
 
 def build(d: Draw) -> dict[str, Any]:

@@ -6,10 +6,16 @@ from __future__ import annotations
 
 from typing import Any
 
-from husky_sim.families.base import Draw, Family, Param, pose, set_point_scenario, travel_duration_s
+from husky_sim.families.base import (
+    POST_RADIUS_M,
+    Draw,
+    Family,
+    Param,
+    pose,
+    set_point_scenario,
+    travel_duration_s,
+)
 from husky_sim.families.registry import register
-
-POST_RADIUS_M = 0.15
 
 
 def build(d: Draw) -> dict[str, Any]:

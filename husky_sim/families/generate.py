@@ -98,7 +98,7 @@ def draw_layout(
         if not verdict.feasible:
             reasons.append(verdict.reason)
             continue
-        header = _header(fam, seed, index, attempt, params, verdict)
+        header = _header(fam, seed, index, attempt, params, verdict, robot)
         return Layout(fam.name, seed, index, attempt, params, scenario, verdict, scenario_yaml(data, header))
     fixed_text = ", ".join(f"{k}={v:g}" for k, v in (fixed or {}).items()) or "none fixed"
     raise ValueError(
@@ -121,10 +121,17 @@ def generate(
 
 
 def _header(
-    fam: Family, seed: int, index: int, attempt: int, params: Mapping[str, float], verdict: Feasibility
+    fam: Family,
+    seed: int,
+    index: int,
+    attempt: int,
+    params: Mapping[str, float],
+    verdict: Feasibility,
+    robot: str,
 ) -> str:
     values = ", ".join(f"{k}={_fmt(v)}" for k, v in params.items())
     way = "n/a" if verdict.path_length_m is None else f"{verdict.path_length_m:.2f} m"
+    robot_arg = "" if robot == DEFAULT_ROBOT else f" --robot {robot}"
     return (
         f"family: {fam.name}\n"
         f"seed: {seed}\n"
@@ -132,7 +139,7 @@ def _header(
         f"attempt: {attempt}\n"
         f"params: {values}\n"
         f"feasible: the body's circumscribed circle has a way of {way} among the static obstacles\n"
-        f"regenerate: husky-sim generate {fam.name} --seed {seed} --count {index + 1} "
+        f"regenerate: husky-sim generate {fam.name} --seed {seed} --count {index + 1}{robot_arg} "
         "(with the same --param values)"
     )
 

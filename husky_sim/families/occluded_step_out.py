@@ -11,6 +11,7 @@ import numpy as np
 
 from husky_sim.families.base import (
     NOMINAL_SPEED_MPS,
+    WALKER_RADIUS_M,
     Draw,
     Family,
     Param,
@@ -19,8 +20,6 @@ from husky_sim.families.base import (
     travel_duration_s,
 )
 from husky_sim.families.registry import register
-
-WALKER_RADIUS_M = 0.3
 
 
 def build(d: Draw) -> dict[str, Any]:

@@ -8,10 +8,18 @@ from __future__ import annotations
 import math
 from typing import Any
 
-from husky_sim.families.base import CONTROLLER_MARGIN_M, Draw, Family, Param, heading, pose, turning_path
+from husky_sim.families.base import (
+    CONTROLLER_MARGIN_M,
+    WALKER_RADIUS_M,
+    Draw,
+    Family,
+    Param,
+    heading,
+    pose,
+    turning_path,
+)
 from husky_sim.families.registry import register
 
-WALKER_RADIUS_M = 0.3
 #: The reference is judged after this long (s), and within this RMSE (m): the shipped crossing
 #: scenario's criterion, for references that run through obstacles.
 SETTLE_S = 10.0

@@ -205,6 +205,8 @@ class EpisodeMetrics:
     collision_at_fault: bool | None = None  # the robot moved faster than AT_FAULT_SPEED_MPS into it
     collision_obstacle: int | None = None  # index of the obstacle touched; None for a wall
     collision_relative_speed_mps: float | None = None  # |robot velocity - touched body's velocity|
+    #: steps whose command a safety filter replaced with its braking backup (husky-cbf's)
+    filter_interventions: int = 0
 
     def as_dict(self) -> dict[str, object]:
         return asdict(self)
@@ -314,4 +316,5 @@ def summarise(
         collision_at_fault=None if contact is None else contact.at_fault,
         collision_obstacle=None if contact is None else contact.obstacle,
         collision_relative_speed_mps=None if contact is None else contact.relative_speed_mps,
+        filter_interventions=int(np.sum(col["filtered"])),
     )

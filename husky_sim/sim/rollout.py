@@ -232,6 +232,7 @@ def _solve_columns(result: ControlResult, deadline_miss: bool) -> dict[str, obje
         "soft_constraint": int(result.soft_constraint),
         "guided": int(result.guided),
         "escape": result.escape,
+        "filtered": int(result.filtered),
         "deadline_miss": int(deadline_miss),
         "solve_ms": 1000.0 * result.solve_time_s,
     }

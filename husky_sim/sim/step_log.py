@@ -53,6 +53,7 @@ LOG_COLUMNS = (
     "soft_constraint",
     "guided",
     "escape",
+    "filtered",
     "deadline_miss",
     "solve_ms",
 )

@@ -145,7 +145,8 @@ class World:
         self._circles = [None if o.moving else o.circle_at(0.0) for o in config.obstacles]
         self.wall_ids: list[int] = self._add_arena(config.arena_half_size_m)
 
-    def _add_cylinder(self, spec: ObstacleSpec) -> int:
+    def _cylinder_shapes(self, spec: ObstacleSpec) -> tuple[int, int]:
+        """A cylinder's collision and visual shapes (movers drawn red, static obstacles grey)."""
         cid = self.client
         shape = p.createCollisionShape(
             p.GEOM_CYLINDER, radius=spec.radius_m, height=spec.height_m, physicsClientId=cid
@@ -157,6 +158,11 @@ class World:
             rgbaColor=[0.8, 0.3, 0.2, 1] if spec.moving else [0.25, 0.25, 0.25, 1],
             physicsClientId=cid,
         )
+        return shape, visual
+
+    def _add_cylinder(self, spec: ObstacleSpec) -> int:
+        cid = self.client
+        shape, visual = self._cylinder_shapes(spec)
         return p.createMultiBody(
             0, shape, visual, basePosition=[spec.x_m, spec.y_m, 0.5 * spec.height_m], physicsClientId=cid
         )
@@ -167,17 +173,7 @@ class World:
         cid = self.client
         key = (spec.radius_m, spec.height_m)
         if key not in self._shapes:
-            shape = p.createCollisionShape(
-                p.GEOM_CYLINDER, radius=spec.radius_m, height=spec.height_m, physicsClientId=cid
-            )
-            visual = p.createVisualShape(
-                p.GEOM_CYLINDER,
-                radius=spec.radius_m,
-                length=spec.height_m,
-                rgbaColor=[0.25, 0.25, 0.25, 1],
-                physicsClientId=cid,
-            )
-            self._shapes[key] = shape, visual
+            self._shapes[key] = self._cylinder_shapes(spec)
         shape, visual = self._shapes[key]
         body = p.createMultiBody(
             0,

@@ -124,6 +124,8 @@ def test_falsify_writes_its_history_the_worst_layout_and_a_figure_for_both_metho
         worst = tmp_path / method / "worst.yaml"
         assert f"score {best:.4f}" in worst.read_text()
         assert (tmp_path / method / "falsify.png").is_file()
+    table = (tmp_path / "falsify.md").read_text().splitlines()
+    assert [row.split(" | ")[2] for row in table[2:]] == ["cma", "random"]
 
 
 def test_failure_classes_and_their_bounds() -> None:
