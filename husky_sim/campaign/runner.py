@@ -71,6 +71,9 @@ class CampaignSpec:
         unknown = [k for k in self.fixed if not any(k in _param_names(f) for f in self.families)]
         if unknown:
             raise ValueError(f"--param {unknown[0]}: no family of this campaign has such a parameter")
+        for name in self.families:
+            for key, value in self.fixed_for(name).items():
+                family(name).param(key).check(value)  # out of range: one line, before any file
         if not 1 <= self.count <= 10_000:
             raise ValueError(f"--count: must be in [1, 10000], got {self.count}")
 

@@ -95,3 +95,13 @@ def test_the_feasibility_check_refuses_a_goal_walled_in_and_a_mover_on_the_start
     mover = {"x_m": 2.0, "y_m": 0.0, "radius_m": 0.3, "vx_mps": -1.0}
     verdict = check_layout(scenario_from_data({**walled, "obstacles": [mover]}))
     assert not verdict.feasible and "mover 0" in verdict.reason
+
+
+def test_a_campaign_with_a_parameter_out_of_range_is_refused_before_any_file(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    out = tmp_path / "campaign"
+    assert main(["campaign", "--families", "crowd", "--param", "walkers=40", "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "walkers" in err and "[4, 12]" in err
+    assert not out.exists()
