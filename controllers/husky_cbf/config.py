@@ -286,8 +286,10 @@ class HuskyCBFConfig:
     #: adds a constraint per body disc and step to the OCP
     slots: int = setting(6, 1, 64)
     #: the safety filter (safety_filter.py): a command is sent only if braking to a stop after it
-    #: keeps every body disc clear of every obstacle until the robot stands; else the backup
-    safety_filter: bool = True
+    #: keeps every body disc clear of every obstacle until the robot stands; else the backup. Off
+    #: by default: braking is its only backup, and a robot that brakes in a mover's path where the
+    #: NMPC would have stepped aside is hit standing (not at fault, but hit)
+    safety_filter: bool = False
     #: the filter's bound on how fast a mover changes its velocity (m/s^2): its circle grows by
     #: half this times the squared time since it was measured
     mover_accel_bound_mps2: float = setting(0.5, 0.0, 10.0, "m/s^2")
