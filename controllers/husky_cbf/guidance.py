@@ -72,14 +72,9 @@ def inflated_circles(
     counts[list(blocks)] = [len(rows) for rows in blocks.values()]
     starts = np.cumsum(counts) - counts
     out = np.empty((int(counts.sum()), 3))
-    t = mover_lead_s + np.linspace(0.0, 0.0, 1)[0]  # a still obstacle's one time, as a mover's first
-    out[starts[still]] = np.column_stack(
-        [
-            data[still, 0] + data[still, 3] * t,
-            data[still, 1] + data[still, 4] * t,
-            data[still, 2] + inflation_m + mover_growth_s * 0.0,  # its speed is 0
-        ]
-    )
+    # a still obstacle's circle is a mover's first with v = 0: its centre (+ 0.0, as x + 0 t reads
+    # a -0.0 coordinate as 0.0) and its radius inflated without growth
+    out[starts[still]] = np.column_stack([data[still, 0:2] + 0.0, data[still, 2] + inflation_m])
     for i, rows in blocks.items():
         out[starts[i] : starts[i] + len(rows)] = rows
     dist = np.hypot(out[:, 0] - robot_xy[0], out[:, 1] - robot_xy[1])

@@ -101,6 +101,10 @@ class Draw:
     def uniform(self, low: float, high: float) -> float:
         return float(self.rng.uniform(low, high))
 
+    def sign(self) -> float:
+        """+1.0 or -1.0, evenly: which side, which way round."""
+        return 1.0 if self.rng.uniform() < 0.5 else -1.0
+
     def static(self, x_m: float, y_m: float, radius_m: float) -> None:
         """A static cylinder."""
         self.obstacles.append({"x_m": _mm(x_m), "y_m": _mm(y_m), "radius_m": _mm(radius_m)})
@@ -146,6 +150,27 @@ def pose(x_m: float, y_m: float, yaw_rad: float = 0.0) -> dict[str, float]:
     return {"x_m": _mm(x_m), "y_m": _mm(y_m), "yaw_rad": round(float(yaw_rad), 4)}
 
 
+def scenario_data(
+    draw: Draw,
+    start: dict[str, float],
+    reference: dict[str, Any],
+    duration_s: float,
+    **extra: Any,
+) -> dict[str, Any]:
+    """Scenario data for a layout with the draw's obstacles, its start and its reference (a goal
+    or a circle), lasting duration_s rounded up to a whole second (name and description are the
+    generator's)."""
+    return {
+        "tau_s": 0.1,
+        "duration_s": float(math.ceil(duration_s)),
+        "robot": {"start": start, "radius_margin_m": CONTROLLER_MARGIN_M},
+        "reference": reference,
+        "obstacles": draw.obstacles,
+        "controller": {"horizon": 12, "gamma": 0.2},
+        **extra,
+    }
+
+
 def set_point_scenario(
     draw: Draw,
     start: dict[str, float],
@@ -153,17 +178,8 @@ def set_point_scenario(
     duration_s: float,
     **extra: Any,
 ) -> dict[str, Any]:
-    """Scenario data for a set-point layout with the draw's obstacles (name and description are
-    the generator's)."""
-    return {
-        "tau_s": 0.1,
-        "duration_s": float(math.ceil(duration_s)),
-        "robot": {"start": start, "radius_margin_m": CONTROLLER_MARGIN_M},
-        "reference": {"goal": goal},
-        "obstacles": draw.obstacles,
-        "controller": {"horizon": 12, "gamma": 0.2},
-        **extra,
-    }
+    """Scenario data for a set-point layout (scenario_data with the goal as its reference)."""
+    return scenario_data(draw, start, {"goal": goal}, duration_s, **extra)
 
 
 def travel_duration_s(distance_m: float) -> float:

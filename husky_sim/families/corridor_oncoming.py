@@ -26,7 +26,7 @@ def build(d: Draw) -> dict[str, Any]:
     leg1, leg2 = d["leg1_m"], d["leg2_m"]
     w = 2 * d.robot.footprint_radius_m + d["width_margin_m"]  # free width, surface to surface
     h, pr = 0.5 * w, POST_RADIUS_M
-    turn = 1.0 if d.rng.uniform() < 0.5 else -1.0  # left (+1) or right (-1) at the corner
+    turn = d.sign()  # left (+1) or right (-1) at the corner
 
     # leg 1 runs along +x from x = -2 to the corner at (leg1, 0); leg 2 along turn * y
     def m(x: float, y: float) -> tuple[float, float]:

@@ -29,9 +29,9 @@ def build(d: Draw) -> dict[str, Any]:
         x = length * (0.3 + 0.5 * (k + d.uniform(0.0, 1.0)) / count)
         t_meet = max(x / NOMINAL_SPEED_MPS + d["meet_offset_s"], 1.5)
         speed = d["speed_mps"] * d.uniform(0.8, 1.0)
-        side = 1.0 if d.rng.uniform() < 0.5 else -1.0
+        side = d.sign()
         direction = -side * math.pi / 2 + d.uniform(-0.5, 0.5)
-        bend = turn if d.rng.uniform() < 0.5 else -turn
+        bend = turn * d.sign()
         path = turning_path((x, d.uniform(-0.3, 0.3)), direction, speed * t_meet, 25.0, bend)
         d.walker(path, speed, WALKER_RADIUS_M)
     return set_point_scenario(d, pose(0.0, 0.0), pose(length, 0.0), travel_duration_s(length))

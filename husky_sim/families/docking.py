@@ -31,7 +31,7 @@ def build(d: Draw) -> dict[str, Any]:
     if bay_depth > 0:
         for side in (-1.0, 1.0):
             d.wall((-bay_depth, side * (half_bay + pr)), (0.0, side * (half_bay + pr)), pr)
-    approach = math.radians(d["approach_deg"]) * (1.0 if d.rng.uniform() < 0.5 else -1.0)
+    approach = math.radians(d["approach_deg"]) * d.sign()
     distance = d["start_distance_m"]
     sx, sy = (gx, 0.0) - distance * heading(approach)
     to_goal = math.atan2(-sy, gx - sx)

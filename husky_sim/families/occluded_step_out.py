@@ -24,7 +24,7 @@ from husky_sim.families.registry import register
 
 def build(d: Draw) -> dict[str, Any]:
     length = d["length_m"]
-    side = 1.0 if d.rng.uniform() < 0.5 else -1.0
+    side = d.sign()
     r = d["occluder_radius_m"]
     px = d["occluder_at"] * length
     py = side * (d.robot.footprint_radius_m + d["occluder_gap_m"] + r)

@@ -9,13 +9,13 @@ import math
 from typing import Any
 
 from husky_sim.families.base import (
-    CONTROLLER_MARGIN_M,
     WALKER_RADIUS_M,
     Draw,
     Family,
     Param,
     heading,
     pose,
+    scenario_data,
     turning_path,
 )
 from husky_sim.families.registry import register
@@ -46,15 +46,9 @@ def build(d: Draw) -> dict[str, Any]:
         path = turning_path(tuple(point), direction, walk * t_meet, 25.0, d.uniform(-0.5, 0.5))
         d.walker(path, walk, WALKER_RADIUS_M)
     start = pose(radius, -d.uniform(0.0, 0.6), math.pi / 2)
-    return {
-        "tau_s": 0.1,
-        "duration_s": float(math.ceil(lap_s + SETTLE_S)),
-        "robot": {"start": start, "radius_margin_m": CONTROLLER_MARGIN_M},
-        "reference": {"circle": {"radius_m": round(radius, 3), "angular_rate_radps": round(rate, 5)}},
-        "obstacles": d.obstacles,
-        "controller": {"horizon": 12, "gamma": 0.2},
-        "success": {"tracking_rmse_m": RMSE_M, "tracking_settle_s": SETTLE_S},
-    }
+    circle = {"radius_m": round(radius, 3), "angular_rate_radps": round(rate, 5)}
+    success = {"tracking_rmse_m": RMSE_M, "tracking_settle_s": SETTLE_S}
+    return scenario_data(d, start, {"circle": circle}, lap_s + SETTLE_S, success=success)
 
 
 FAMILY = register(
