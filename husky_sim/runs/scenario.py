@@ -63,8 +63,7 @@ if TYPE_CHECKING:
 #: 10 minutes is 0.6 GB) unless none moves, when it holds them once.
 MAX_OBSTACLES = 5000
 #: Most obstacle slots an NLP may be built for (`controller.max_obstacle_slots`): each adds its
-#: constraints at every predicted step, and solve time grows with them (7 slots: about 5 ms at
-#: N = 5, the paper's OCP).
+#: constraints at every predicted step, and solve time grows with them (`husky-sim bench`).
 MAX_OBSTACLE_SLOTS = 64
 #: Least gap (m) between the surfaces of two obstacles of a random field.
 RANDOM_GAP_M = 0.1

@@ -20,8 +20,9 @@ threshold: the engine's penetration depths depend on it.
 From NUMPY_FROM obstacles on, their bounds are worked out together with numpy (the same
 arithmetic as one at a time, so the same numbers) and only the bodies the walk can reach are
 ordered: those whose bound is within exact_within_m, then the nearest beyond it, whose bound ends
-the walk. A step then costs about 25 us for 1,000 obstacles instead of a Python loop and a sort
-over all of them (about 290 us); below NUMPY_FROM, numpy's call overheads cost more than the loop.
+the walk, so a step's cost no longer grows with a Python loop and a sort over every obstacle;
+below NUMPY_FROM, numpy's per-call overheads cost more than the loop (`husky-sim bench-sim`
+times both worlds).
 """
 
 from __future__ import annotations
@@ -34,7 +35,7 @@ import numpy as np
 from husky_sim.sim.bullet import pybullet as p
 
 #: Obstacles from which `smallest` works out their bounds with numpy (fewer: a Python loop, which
-#: is faster there: about 3 us for 8 obstacles against 11 us).
+#: is faster for a handful of bodies than numpy's per-call overheads).
 NUMPY_FROM = 32
 
 

@@ -23,11 +23,12 @@ from husky_sim.sim.bullet import pybullet as p
 
 #: Worlds with more obstacles than this make their static ones static rigid bodies (PyBullet's
 #: maximal coordinates), asleep, with one collision and one visual shape per (radius, height).
-#: The engine visits every fixed-base multibody at every step, asleep or not (1,000 static
-#: cylinders: about 0.5 ms a step, seven times the Husky alone), and skips sleeping static
-#: bodies (about 0.02 ms). An immovable cylinder is the same obstacle either way: the Husky driving
-#: into one moves and clears bit for bit alike (tests/sim/test_large_world.py). Worlds up to this
-#: many, every shipped scenario's among them, keep the multibodies their logs were made with.
+#: The engine visits every fixed-base multibody at every step, asleep or not, so a world of a
+#: thousand posts costs several times the Husky alone; it skips sleeping static bodies
+#: (`husky-sim bench-sim --world large` prints the physics step's cost). An immovable cylinder
+#: is the same obstacle either way: the Husky driving into one moves and clears bit for bit alike
+#: (tests/sim/test_large_world.py). Worlds up to this many, every shipped scenario's among them,
+#: keep the multibodies their logs were made with.
 RIGID_STATICS_ABOVE = 64
 
 
