@@ -39,7 +39,7 @@ class ControlResult:
     obstacles_ignored: int  # obstacles dropped because more than the slots were given
     recovered_by: str = ""  # the retry guess that solved after a failed solve (controllers.recovery)
     soft_constraint: bool = False  # solved only with the obstacle constraint's exact-penalty slack
-    guided: bool = False  # tracked a guidance waypoint instead of the reference (path blocked)
+    guided: bool = False  # tracked a waypoint instead of the reference (a behaviour's, a planner's)
     solver: str = ""  # the NLP solver whose answer this is (fatrop, ipopt, opti)
     solver_fallback: str = ""  # why the structured solver's answer was not used (IPOPT solved)
     # no solver ran: every problem of the step had been solved before, this step or the last, bit
@@ -48,8 +48,8 @@ class ControlResult:
     #: when the plan starts after the measurement it was solved from (s): 0 for a plan from the
     #: measured pose; husky-cbf's starts where the drive acts on its first command (its dead time)
     plan_start_s: float = 0.0
-    #: the deadlock escape's phase this step ("" when none; husky-cbf's escape.py): the
-    #: controller found itself making no progress and follows a recovery waypoint
+    #: the deadlock recovery's phase this step ("" when none; husky-cbf's behaviours/recovery.py):
+    #: the controller found itself making no progress and follows a recovery waypoint
     escape: str = ""
     #: a safety filter replaced the controller's command with its backup (husky-cbf's
     #: safety_filter.py): the command's braking manoeuvre was predicted to touch an obstacle

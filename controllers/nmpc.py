@@ -61,10 +61,9 @@ class NMPCController:
         self._plan: Plan | None = None  # last successfully solved plan
         self._plan_age = 0  # control steps since that plan was solved
         self._repeats = RepeatedProblems() if self._backend.pure else None
-        # the retries from the recovery guesses: FATROP alone on the structured backend. From these
-        # guesses its IPOPT fallback solved none of 621 failed steps' problems (the suite, the
-        # claims report, the paper's gamma cells; docs/solvers.md, "Solver retries") and took 4.4 s of the
-        # suite's 70 s of CPU, up to 40 ms a guess inside a 100 ms control period
+        # the retries from the recovery guesses: FATROP alone on the structured backend. IPOPT from
+        # a guess where FATROP failed rarely succeeds, and each try costs a large share of a control
+        # period (docs/solvers.md, "Solver retries")
         self._retry_solve = (
             self._backend.solve_without_fallback
             if isinstance(self._backend, FatropSolver)

@@ -8,7 +8,8 @@ compiled): it scales the objective, calls FATROP and returns the solution, so ea
 call of compiled code. The bounds are its inputs, so configurations that differ only in bounds
 share one compiled solver. Its status shim tells which exit FATROP took.
 
-Three decisions make FATROP converge where it used to stall (docs/solvers.md):
+Three decisions make FATROP converge on these problems rather than stall at its barrier floor
+(docs/solvers.md):
 - **Objective scaling per solve**, as IPOPT's gradient-based scaling does, but to a largest
   gradient entry of GRADIENT_SCALE (IPOPT: 100) at the guess. Unscaled, FATROP's absolute dual
   tolerance on objectives of 1e3 to 1e5 asked for more than its Riccati factorisation delivers

@@ -1,12 +1,12 @@
 """The drive's dead time as husky-cbf sees it: commands sent that the drive has not acted on yet.
 
-A real Husky's drive acts on a command about 0.34 s after it is sent (the wet-grass recording;
-assets/husky_a200/grounds/), close to two control steps at tau = 0.2 s. Planned from the measured
-pose, a plan's first command took effect only after the robot had driven on for that long under
-the commands before it: a plan that stopped or turned at the edge of an obstacle's margin left the
-robot a third of a second late. So each plan starts where the robot will be when its first
-command takes effect: the pose and body yaw rate predicted over the dead time under the commands
-already sent, replayed through the drive's acceleration limiter as the drive applies them.
+A drive acts on a command some time after it is sent (its dead time, RobotResponse.command_delay_s;
+for a Husky a few tenths of a second, assets/husky_a200/grounds/). Planned from the measured pose,
+a plan's first command would take effect only after the robot had driven on for that long under
+the commands before it, so a plan that stops or turns at the edge of an obstacle's margin would
+act late. So each plan starts where the robot will be when its first command takes effect: the
+pose and body yaw rate predicted over the dead time under the commands already sent, replayed
+through the drive's acceleration limiter as the drive applies them.
 """
 
 from __future__ import annotations

@@ -1,9 +1,8 @@
 """A steady-state Kalman filter on the measured pose, for husky-cbf's set-point approach decisions.
 
-The approach (guidance.LineApproach) switches on centimetres: it docks when the robot is more than
-7 cm off the goal's line and leaves aligned within 3 cm and 0.05 rad. A localisation with a few
-centimetres of white noise flips those decisions every step: measured in `husky-sim check`, a
-robot 6 cm off the line kept backing up 1.5 m and driving in again until the run timed out. The
+The set-point approach (behaviours.approach.SetPointApproach) switches on centimetres: it docks
+when the robot is a few centimetres off the goal's line and leaves once aligned within fewer. A
+localisation with centimetres of white noise would flip those decisions from step to step. The
 filter predicts the pose from the commands the drive is applying (unicycle over tau) and corrects
 it with the measurement at a constant gain per coordinate, the steady state of a scalar Kalman
 filter for a random walk (process noise: the drive's speed and yaw-rate error over tau). With no

@@ -41,10 +41,9 @@ def extended_rhs(z: ca.SX, a: ca.SX, response: RobotResponse) -> ca.SX:
 
 def rk4_substeps(tau_s: float, response: RobotResponse) -> int:
     """RK4 steps per tau_s (s): enough that each is at most MAX_STEP_PER_LAG yaw time constants.
-    Explicit RK4 on the lag d(omega)/dt = -omega / T diverges once a step exceeds about 2.8 T; a
-    robot whose yaw follows within a hundredth of a second (a light robot on unfitted tyres) made
-    every predicted state blow up and the structured solver never return. The Husky (T = 0.11 s,
-    tau <= 0.2 s) takes one step, as before."""
+    Explicit RK4 on the lag d(omega)/dt = -omega / T diverges once a step exceeds about 2.8 T, so a
+    robot whose yaw follows within a fraction of tau needs several steps per tau; a Husky
+    (T about 0.1 s, tau <= 0.2 s) takes one."""
     return max(1, math.ceil(tau_s / (MAX_STEP_PER_LAG * response.yaw_time_constant_s) - 1e-9))
 
 

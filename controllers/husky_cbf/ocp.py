@@ -42,10 +42,9 @@ from controllers.model import wrap_angle_sym
 INF = float("inf")
 #: IPOPT iterations for a hard problem that FATROP failed on; past them the problem counts as
 #: infeasible and the controller's exact-penalty re-solve follows (which returns a hard-feasible
-#: plan, zero slack, where it finds one). IPOPT's verdict on an infeasible hard problem was what
-#: made husky-cbf's solves exceed tau: its restoration phase ran 43 to 200 iterations (median 100
-#: to 115; paper_dynamic_tracking and the crossing at N = 7), 80 ms of a 90 ms fallback step. In
-#: the 36 suite cells IPOPT rescued two feasible hard problems, in 33 and 107 iterations.
+#: plan, zero slack, where it finds one). The cap bounds the step's solve time: proving a hard
+#: problem infeasible (IPOPT's restoration phase) takes far more iterations than solving a
+#: feasible one, and the exact-penalty re-solve answers that question for less.
 HARD_FALLBACK_MAX_ITER = 40
 
 

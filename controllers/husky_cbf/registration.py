@@ -61,7 +61,7 @@ def profile(config: HuskyCBFConfig) -> PlanProfile:
 HUSKY_CBF = register(
     ControllerEntry(
         "husky-cbf",
-        "ours: Relax-CBF on the Husky's drive dynamics, a body of discs, guidance and deadlock recovery",
+        "ours: Relax-CBF on the Husky's drive dynamics, a body of discs, a planner and behaviours",
         configure,
         build,
         profile,

@@ -1,25 +1,41 @@
-"""A safety filter on husky-cbf's command, in the manner of gatekeeper (Agrawal and Panagou) and
-backup control barrier functions (Gurriet et al.): a command is sent only if, once it acts, a
-backup manoeuvre (braking to a stop under the drive's limits) keeps every body disc clear of
-every obstacle until the robot stands; otherwise the backup that keeps the most clearance is sent.
+"""A safety filter on husky-cbf's commands, in the manner of gatekeeper (Agrawal and Panagou) and
+backup control barrier functions (Gurriet et al.): the robot always holds a committed trajectory
+that ends standing and was checked clear of every obstacle; a new plan replaces it only if it
+passes the same check.
 
-What is checked: from the extended state at the instant the command acts (after the drive's dead
-time and the sensing latency, husky-cbf's `z0`), the command is held for one control period and
-then the drive brakes (v and omega commanded 0, ramped at its acceleration limits, the body's
-yaw rate lagging as the model says) until the robot stands. Along that manoeuvre each body disc
-must clear each obstacle: a static one as measured, a mover at constant velocity from its
+The check. From the extended state at the instant the next command acts (after the drive's dead
+time and the sensing latency, husky-cbf's `z0`), a candidate holds each of its commands for one
+control period, then the drive brakes (v and omega commanded 0, ramped at its acceleration limits,
+the body's yaw rate lagging as the model says) until the robot stands. Along it each body disc
+must clear each obstacle: a static one as measured; a mover at constant velocity from its
 measurement, its radius grown by half a stated bound on its change of velocity times the squared
-time since it was measured (`mover_accel_bound_mps2`: a walker that speeds up, slows down or
-turns within that bound stays inside). The alternative, braking now, is checked the same way.
+time since it was measured (`mover_accel_bound_mps2`: a walker that speeds up, slows down or turns
+within that bound stays inside its circle).
 
-Why braking: a robot that stands cannot be at fault for a contact (passive motion safety, Macek
-et al. 2009; Bouraine, Fraichard and Salhi 2012). If the command sent last step passed the check,
-braking now is that step's backup continued, so a backup that passed the check exists every step
-while the assumptions hold: the drive brakes as modelled, movers keep within the bound, and every
-obstacle that matters was measured. What breaks it: a drive that brakes slower than its limits say
-(a heavy payload on low friction), a mover that turns harder than the bound (a walker's sudden
-turn), and an obstacle first seen inside the stopping distance (stepping out from behind a pillar
-with the sensing model on); then the filter sends the backup that keeps the most clearance.
+The choice, each step. Candidates are the NMPC's plan cut after k of its commands, then braking,
+for k = N down to 1; the first that passes the check becomes the committed trajectory. If none
+does, the committed trajectory is kept, one command further on. If that fails too (an assumption
+broke), the filter sends whichever braking manoeuvre keeps the most clearance: the committed
+trajectory, or braking now, straight or along the arc now commanded.
+
+Standing in a mover's way. Braking is no refuge where a mover's constant-velocity track reaches
+the robot standing within the threat horizon (husky-cbf's yielding horizon: the horizon over
+which it steps aside from movers). There, if no cut passes the check, the longest cut of the plan
+that clears the movers' tracks without their growth is sent (an evasion, which the NMPC's own
+mover constraints shaped); if none does, the braking manoeuvre as above.
+
+Why this bounds the robot's fault. A robot that stands cannot be at fault for a contact (passive
+motion safety: Macek et al. 2009; Bouraine, Fraichard and Salhi 2012), and every committed
+trajectory ends standing. A committed trajectory stays clear one step later: the robot is where
+the drive model put it, and a mover measured again is inside its old grown circle, since a change
+of velocity of at most a over tau moves a mover at most a tau^2 / 2 off its old prediction and its
+new velocity at most a tau off the old, which is exactly what the old circle's larger growth
+covers. So while the assumptions hold, a checked trajectory exists every step. What breaks them: a
+drive that brakes slower than its limits say (a heavy payload on low friction), a mover that
+changes velocity faster than the bound, velocity estimates off by more than the bound allows, and
+an obstacle first seen inside the stopping distance (the sensing model's occlusion and range);
+and an evasion from a mover that would reach the standing robot, which is checked against the
+movers' tracks only.
 """
 
 from __future__ import annotations
@@ -33,10 +49,10 @@ import numpy as np
 from controllers.husky_cbf.config import RobotResponse
 from controllers.obstacles import Obstacle
 
-#: Integration step of the backup manoeuvre (s).
+#: Integration step of a checked manoeuvre (s): a disc moves at most 2 cm between checks at 1 m/s.
 STEP_S = 0.02
-#: Longest backup simulated (s): braking from the drive's top speed takes far less.
-MAX_BACKUP_S = 4.0
+#: Longest braking simulated (s): braking from the drive's top speed takes far less.
+MAX_BRAKING_S = 4.0
 #: A robot below these speeds (m/s, rad/s) stands.
 STANDING_MPS = 0.02
 STANDING_RADPS = 0.05
@@ -44,8 +60,9 @@ STANDING_RADPS = 0.05
 
 @dataclass(frozen=True)
 class FilterVerdict:
-    """The command to send, whether it is the filter's backup rather than the NMPC's command, and
-    the smallest clearance (m) of the manoeuvre it begins (negative: a predicted contact)."""
+    """The command to send, whether it differs from the NMPC's first command (the filter
+    intervened), and the smallest clearance (m) of the checked trajectory it begins (negative: a
+    predicted contact)."""
 
     command: np.ndarray
     intervened: bool
@@ -53,8 +70,8 @@ class FilterVerdict:
 
 
 class SafetyFilter:
-    """Checks a command's backup manoeuvre (see the module docstring) for a body covered by discs
-    at `disc_offsets_m` along its axis, of radius `disc_radius_m`."""
+    """Holds and checks committed trajectories (see the module docstring) for a body covered by
+    discs at `disc_offsets_m` along its axis, of radius `disc_radius_m`."""
 
     def __init__(
         self,
@@ -64,26 +81,35 @@ class SafetyFilter:
         disc_radius_m: float,
         mover_accel_bound_mps2: float,
         lead_s: float,
+        threat_horizon_s: float = 0.0,
     ) -> None:
         self._r = response
         self._tau_s = tau_s
+        self._hold_steps = max(round(tau_s / STEP_S), 1)
         self._offsets = np.asarray(disc_offsets_m, dtype=float)
         self._disc_radius = disc_radius_m
         self._accel_bound = mover_accel_bound_mps2
         self._lead_s = lead_s  # from the measurement to the instant z0 stands for (s)
+        self._threat_s = threat_horizon_s  # how far ahead a standing robot looks for movers (s)
+        self.reset()
 
-    def backup(self, z0: np.ndarray, command: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
-        """The manoeuvre from the extended state z0 = [x, y, theta, v, omega_cmd, omega]: `command`
-        [v, omega] held for one control period (None: none), then braking until the robot stands.
-        Returns its times (s, from z0) and poses (n, 3)."""
+    def reset(self) -> None:
+        """Commit braking now: at the start, and whenever the loop sent a braking command unchecked
+        (a failed solve)."""
+        self._committed = np.zeros((0, 2))
+
+    def manoeuvre(self, z0: np.ndarray, commands: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+        """The manoeuvre from the extended state z0 = [x, y, theta, v, omega_cmd, omega]: each of
+        `commands` (k, 2) [v, omega] held one control period (None or empty: none), then braking
+        until the robot stands. Returns its times (s, from z0) and poses (n, 3)."""
         r = self._r
+        plan = np.zeros((0, 2)) if commands is None else np.asarray(commands, dtype=float).reshape(-1, 2)
         x, y, th, v, w_cmd, w = (float(c) for c in z0[:6])
         limit_v, limit_w = r.max_linear_accel_mps2 * STEP_S, r.max_angular_accel_radps2 * STEP_S
-        hold = 0 if command is None else round(self._tau_s / STEP_S)
+        held = len(plan) * self._hold_steps
         times, poses = [0.0], [(x, y, th)]
-        steps = round(MAX_BACKUP_S / STEP_S)
-        for k in range(steps):
-            target_v, target_w = (command[0], command[1]) if k < hold else (0.0, 0.0)
+        for k in range(held + round(MAX_BRAKING_S / STEP_S)):
+            target_v, target_w = plan[k // self._hold_steps] if k < held else (0.0, 0.0)
             v += min(max(target_v - v, -limit_v), limit_v)
             w_cmd += min(max(target_w - w_cmd, -limit_w), limit_w)
             w += STEP_S * (r.yaw_gain * w_cmd - w) / r.yaw_time_constant_s
@@ -92,19 +118,37 @@ class SafetyFilter:
             y += STEP_S * v * math.sin(th)
             times.append((k + 1) * STEP_S)
             poses.append((x, y, th))
-            if k >= hold and abs(v) < STANDING_MPS and abs(w) < STANDING_RADPS:
+            if k >= held and abs(v) < STANDING_MPS and abs(w) < STANDING_RADPS:
                 break
         return np.array(times), np.array(poses)
 
-    def clearance(self, times_s: np.ndarray, poses: np.ndarray, obstacles: Sequence[Obstacle]) -> float:
-        """The smallest clearance (m) of the body discs along a manoeuvre to the obstacles (see
-        the module docstring); inf when none can come within the manoeuvre's reach."""
+    def _braking(self, z0: np.ndarray) -> list[np.ndarray]:
+        """Braking now as command sequences: straight (none), and along the arc commanded now
+        (v commanded 0 and the yaw rate held, for the periods braking takes)."""
+        periods = max(math.ceil(abs(float(z0[3])) / (self._r.max_linear_accel_mps2 * self._tau_s)), 1)
+        return [np.zeros((0, 2)), np.tile([0.0, float(z0[4])], (periods, 1))]
+
+    def backup(self, z0: np.ndarray, command: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+        """`command` held one control period (None: none), then braking: manoeuvre()."""
+        return self.manoeuvre(z0, None if command is None else np.asarray(command).reshape(1, 2))
+
+    def clearance(
+        self,
+        times_s: np.ndarray,
+        poses: np.ndarray,
+        obstacles: Sequence[Obstacle],
+        accel_bound_mps2: float | None = None,
+    ) -> float:
+        """The smallest clearance (m) of the body discs along a manoeuvre to the obstacles, movers
+        grown at `accel_bound_mps2` (default: the filter's bound; see the module docstring); inf
+        when none can come within the manoeuvre's reach."""
         if not obstacles:
             return math.inf
+        bound_mps2 = self._accel_bound if accel_bound_mps2 is None else accel_bound_mps2
         data = np.array([(o.x_m, o.y_m, o.vx_mps, o.vy_mps, o.radius_m) for o in obstacles])
         since = self._lead_s + times_s  # time since the measurement (s), (T,)
         speed = np.hypot(data[:, 2], data[:, 3])
-        growth = np.where(speed > 0.0, 0.5 * self._accel_bound * since[-1] ** 2, 0.0)
+        growth = np.where(speed > 0.0, 0.5 * bound_mps2 * since[-1] ** 2, 0.0)
         # only obstacles that can come within the manoeuvre's reach need the full check
         reach = float(np.max(np.hypot(*(poses[:, :2] - poses[0, :2]).T))) + np.max(np.abs(self._offsets))
         start = data[:, 0:2] + data[:, 2:4] * since[0]
@@ -114,21 +158,65 @@ class SafetyFilter:
             return math.inf
         data, speed = data[near], speed[near]
         centres = data[None, :, 0:2] + data[None, :, 2:4] * since[:, None, None]  # (T, M, 2)
-        grown = data[None, :, 4] + np.where(
-            speed[None, :] > 0.0, 0.5 * self._accel_bound * since[:, None] ** 2, 0.0
-        )
+        grown = data[None, :, 4] + np.where(speed[None, :] > 0.0, 0.5 * bound_mps2 * since[:, None] ** 2, 0.0)
         heading = np.stack([np.cos(poses[:, 2]), np.sin(poses[:, 2])], axis=1)  # (T, 2)
         discs = poses[:, None, :2] + self._offsets[None, :, None] * heading[:, None, :]  # (T, D, 2)
         gaps = np.linalg.norm(discs[:, :, None, :] - centres[:, None, :, :], axis=3)  # (T, D, M)
         return float(np.min(gaps - self._disc_radius - grown[:, None, :]))
 
-    def filter(self, z0: np.ndarray, command: np.ndarray, obstacles: Sequence[Obstacle]) -> FilterVerdict:
-        """The NMPC's `command` if its backup clears every obstacle, else whichever of it and
-        braking now keeps the most clearance."""
-        kept = self.clearance(*self.backup(z0, command), obstacles)
-        if kept >= 0.0:
-            return FilterVerdict(np.asarray(command, dtype=float), False, kept)
-        braking = self.clearance(*self.backup(z0, None), obstacles)
-        if braking > kept:
-            return FilterVerdict(np.zeros(2), True, braking)
-        return FilterVerdict(np.asarray(command, dtype=float), False, kept)
+    def filter(self, z0: np.ndarray, plan: np.ndarray, obstacles: Sequence[Obstacle]) -> FilterVerdict:
+        """The command to send now, given the NMPC's planned commands `plan` ((k, 2) [v, omega]
+        per control period, or one (2,) command): its first, if a cut of the plan passes the check
+        (the longest becomes the committed trajectory); else the committed trajectory's next
+        command if it still passes; else the braking manoeuvre that keeps the most clearance.
+        Where that manoeuvre would stand in a mover's way (a mover's track reaches it within the
+        threat horizon), a cut of the plan that clears the movers' tracks without their growth is
+        sent instead, if one does."""
+        plan = np.asarray(plan, dtype=float).reshape(-1, 2)
+        cut = self._longest_clear_cut(z0, plan, obstacles, self._accel_bound)
+        if cut is not None:
+            k, kept = cut
+            self._committed = plan[1:k].copy()
+            return FilterVerdict(plan[0].copy(), False, kept)
+        committed = self._committed
+        kept = self.clearance(*self.manoeuvre(z0, committed), obstacles)
+        if kept < 0.0:
+            options = [(kept, committed)]
+            for backup in self._braking(z0):
+                options.append((self.clearance(*self.manoeuvre(z0, backup), obstacles), backup))
+            kept, committed = max(options, key=lambda option: option[0])
+        times, poses = self.manoeuvre(z0, committed)
+        if self._hit_standing(times[-1], poses[-1], obstacles):
+            cut = self._longest_clear_cut(z0, plan, obstacles, 0.0)
+            if cut is not None:
+                k, kept = cut
+                self._committed = plan[1:k].copy()
+                return FilterVerdict(plan[0].copy(), False, kept)
+        command = committed[0].copy() if len(committed) else np.zeros(2)
+        self._committed = committed[1:].copy()
+        return FilterVerdict(command, not np.allclose(command, plan[0]), kept)
+
+    def _longest_clear_cut(
+        self, z0: np.ndarray, plan: np.ndarray, obstacles: Sequence[Obstacle], accel_bound: float
+    ) -> tuple[int, float] | None:
+        """The longest cut k of `plan` whose manoeuvre clears every obstacle with movers grown at
+        `accel_bound` (m/s^2), and its clearance (m); None when no cut does."""
+        for k in range(len(plan), 0, -1):
+            kept = self.clearance(*self.manoeuvre(z0, plan[:k]), obstacles, accel_bound)
+            if kept >= 0.0:
+                return k, kept
+        return None
+
+    def _hit_standing(self, stand_s: float, pose: np.ndarray, obstacles: Sequence[Obstacle]) -> bool:
+        """Whether a mover at constant velocity (not grown) reaches a body disc of a robot standing
+        at `pose` from `stand_s` (s from z0) within the threat horizon."""
+        movers = [o for o in obstacles if o.vx_mps != 0.0 or o.vy_mps != 0.0]
+        if not movers or self._threat_s <= 0.0:
+            return False
+        data = np.array([(o.x_m, o.y_m, o.vx_mps, o.vy_mps, o.radius_m) for o in movers])
+        since = self._lead_s + stand_s + np.arange(0.0, self._threat_s + STEP_S, 5 * STEP_S)
+        centres = data[None, :, 0:2] + data[None, :, 2:4] * since[:, None, None]  # (T, M, 2)
+        heading = np.array([math.cos(pose[2]), math.sin(pose[2])])
+        discs = pose[None, :2] + self._offsets[:, None] * heading[None, :]  # (D, 2)
+        gaps = np.linalg.norm(centres[:, :, None, :] - discs[None, None, :, :], axis=3)  # (T, M, D)
+        return bool(np.any(gaps < data[None, :, 4, None] + self._disc_radius))

@@ -1,12 +1,11 @@
 """How well the robot turns compared with its yaw model: a loaded skid-steer may not.
 
-Loaded (37 to 75 kg on the Husky's top plate) and on grippy ground, the PyBullet Husky turned at
-0.01 to 0.10 of a commanded arc, where the identified lag expects 0.49: the NMPC, planning the
-turn round an obstacle that its model promised, kept its speed until braking was too late (and a
-skid-steer that scrubs through a hard turn also brakes at a fraction of its limit). The monitor
-compares the heading change measured over the last window with the one the model predicted; while
-the ratio is low, the controller caps the speed (HuskyCBFConfig.weak_turn_*), so that a robot
-that cannot steer round an obstacle stops before it.
+A skid-steer with a payload, on grippy ground, can turn at a small fraction of the arc its
+identified yaw lag predicts: an NMPC planning the turn round an obstacle that its model promises
+keeps its speed until braking is too late (and a skid-steer that scrubs through a hard turn also
+brakes at a fraction of its limit). The monitor compares the heading change measured over the last
+window with the one the model predicted; while the ratio is low, the controller caps the speed
+(controller.WEAK_TURN_*), so that a robot that cannot steer round an obstacle stops before it.
 """
 
 from __future__ import annotations

@@ -31,6 +31,7 @@ from husky_sim.cli import (
     ros2,
     run,
     scenarios,
+    settings,
     suite,
 )
 from husky_sim.cli.common import SOLVER_CHOICES, OneLineErrorParser, UsageError, warn
@@ -41,6 +42,7 @@ __all__ = ["SOLVER_CHOICES", "UsageError", "build_parser", "entry", "main"]
 #: The commands in the order `husky-sim --help` lists them.
 COMMANDS = (
     scenarios,
+    settings,
     families,
     run,
     ros2,

@@ -1,4 +1,5 @@
-"""`husky-sim bench` (solve times per backend), `bench-sim` (closed-loop real-time factor) and
+"""`husky-sim bench` (solve times per backend), `bench-sim` (closed-loop real-time factor),
+`bench-campaign` (a campaign's real-time factors and controller step times) and
 `bench-divergence` (where FATROP's and IPOPT's closed loops part on one cell)."""
 
 from __future__ import annotations
@@ -64,6 +65,14 @@ def cmd_bench_sim(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_bench_campaign(args: argparse.Namespace) -> int:
+    from husky_sim.bench.campaign_speed import campaign_speed
+
+    for folder in args.folders:
+        print(campaign_speed(folder).report())
+    return 0
+
+
 def cmd_bench_divergence(args: argparse.Namespace) -> int:
     from husky_sim.bench.divergence import trace_divergence
     from husky_sim.runs.scenario import load_scenario
@@ -74,7 +83,7 @@ def cmd_bench_divergence(args: argparse.Namespace) -> int:
 
 
 def add_parsers(sub: argparse._SubParsersAction) -> None:
-    """Register `bench`, `bench-sim`, `bench-divergence`."""
+    """Register `bench`, `bench-sim`, `bench-campaign`, `bench-divergence`."""
     bench = sub.add_parser(
         "bench", help="NMPC solve times of every solver backend on the same recorded closed-loop problems"
     )
@@ -135,6 +144,13 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
         help="also print the yaw rate achieved with payload, torque, friction",
     )
     bench_sim.set_defaults(func=cmd_bench_sim)
+    bench_campaign = sub.add_parser(
+        "bench-campaign",
+        help="a campaign's closed-loop real-time factor (median over its runs) and controller step "
+        "time (median, p99 over every step), against the targets 10x and 25 ms",
+    )
+    bench_campaign.add_argument("folders", nargs="+", help="`husky-sim campaign` output folders")
+    bench_campaign.set_defaults(func=cmd_bench_campaign)
     divergence = sub.add_parser(
         "bench-divergence",
         help="where one PyBullet cell's FATROP and IPOPT closed loops part, and whether that is a "

@@ -51,6 +51,20 @@ def test_a_campaign_writes_a_row_per_run_and_a_report(straight: Path) -> None:
     assert (straight / "figures" / "crossing_walkers.png").is_file()
 
 
+def test_bench_campaign_reads_every_run_and_every_step(straight: Path) -> None:
+    from husky_sim.bench.campaign_speed import campaign_speed
+
+    speed = campaign_speed(straight)
+    steps = 0
+    for run_dir in sorted((straight / "runs").iterdir()):
+        with (run_dir / "log.csv").open(newline="") as f:
+            steps += sum(1 for _ in csv.DictReader(f))
+    assert speed.runs == 2 and speed.steps == steps and speed.tau_s == pytest.approx(0.1)
+    assert 0.0 < speed.step_ms_median <= speed.step_ms_p99 <= speed.step_ms_max
+    assert speed.real_time_factor_p10 <= speed.real_time_factor_median
+    assert "real-time factor: median" in speed.report() and "p99" in speed.report()
+
+
 def test_a_killed_campaign_restarted_writes_the_same_csv(straight: Path, tmp_path: Path) -> None:
     out = tmp_path / "killed"
     command = [sys.executable, "-m", "husky_sim.cli", *CAMPAIGN, "--jobs", "1", "--out", str(out)]

@@ -22,8 +22,8 @@ RESPONSE = RobotResponse(
 DISCS = np.array([-0.33, 0.0, 0.33])
 
 
-def _filter(accel_bound: float = 0.5, lead_s: float = 0.0) -> SafetyFilter:
-    return SafetyFilter(RESPONSE, 0.1, DISCS, 0.38, accel_bound, lead_s)
+def _filter(accel_bound: float = 0.5, lead_s: float = 0.0, threat_s: float = 0.0) -> SafetyFilter:
+    return SafetyFilter(RESPONSE, 0.1, DISCS, 0.38, accel_bound, lead_s, threat_s)
 
 
 def _moving_at(v_mps: float) -> np.ndarray:
@@ -92,3 +92,45 @@ def test_when_no_backup_clears_the_one_that_keeps_more_clearance_is_sent() -> No
     verdict = f.filter(_moving_at(1.0), command, post)
     assert kept < 0 and verdict.clearance_m == max(kept, braking) and verdict.intervened
     assert math.isinf(f.clearance(*f.backup(_moving_at(1.0), command), []))
+
+
+def test_the_committed_trajectory_carries_the_robot_when_no_cut_of_a_new_plan_clears() -> None:
+    f = _filter()
+    cruise, reverse = np.tile([0.5, 0.0], (5, 1)), np.tile([-1.0, 0.0], (5, 1))
+    standing = np.zeros(6)
+    first = f.filter(standing, cruise, [])
+    assert not first.intervened and np.array_equal(first.command, cruise[0])
+    # a post 5 mm behind the rear disc: every cut of the reversing plan touches it, the committed
+    # forward run does not, so its next command is sent instead of the plan's
+    behind = [Obstacle(-(0.33 + 0.38 + 0.3 + 0.005), 0.0, 0.3)]
+    assert f.clearance(*f.manoeuvre(standing, reverse[:1]), behind) < 0
+    second = f.filter(standing, reverse, behind)
+    assert second.intervened and np.array_equal(second.command, cruise[1]) and second.clearance_m >= 0
+    f.reset()  # a reset commits braking now: standing still
+    third = f.filter(standing, reverse, behind)
+    assert third.intervened and np.array_equal(third.command, np.zeros(2))
+
+
+def test_a_longer_cut_passes_only_if_its_whole_manoeuvre_clears() -> None:
+    f = _filter()
+    straight = np.tile([1.0, 0.0], (10, 1))
+    post = [Obstacle(2.3, 0.0, 0.3)]  # braking after one period clears it, after ten it does not
+    assert f.clearance(*f.manoeuvre(_moving_at(1.0), straight[:1]), post) >= 0
+    assert f.clearance(*f.manoeuvre(_moving_at(1.0), straight), post) < 0
+    verdict = f.filter(_moving_at(1.0), straight, post)
+    assert not verdict.intervened and verdict.clearance_m >= 0
+
+
+def test_where_standing_is_no_refuge_a_cut_clear_of_the_movers_tracks_is_sent() -> None:
+    standing = np.zeros(6)
+    head_on = [Obstacle(1.2, 0.0, 0.3, -0.6, 0.0)]  # walks at the robot
+    reverse = np.tile([-1.0, 0.0], (5, 1))
+    # a bound so large that no moving manoeuvre clears the grown circle: braking is committed
+    braking = _filter(accel_bound=50.0).filter(standing, reverse, head_on)
+    assert braking.intervened and np.array_equal(braking.command, np.zeros(2))
+    # with a threat horizon over which the walker reaches the standing robot, the evasion goes
+    evading = _filter(accel_bound=50.0, threat_s=6.0).filter(standing, reverse, head_on)
+    assert not evading.intervened and np.array_equal(evading.command, reverse[0])
+    # a walker whose track passes beside the standing robot is no threat: the robot brakes
+    passing = [Obstacle(1.2, 1.2, 0.3, -0.6, 0.0)]
+    assert _filter(accel_bound=50.0, threat_s=6.0).filter(standing, reverse, passing).intervened

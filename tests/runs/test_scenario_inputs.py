@@ -17,6 +17,7 @@ from hypothesis import strategies as st
 from pydantic import BaseModel
 
 from controllers.husky_cbf import HuskyCBFConfig
+from controllers.settings import nested_settings
 from husky_sim.cli import main
 from husky_sim.runs.run_folder import default_run_dir, run_dir_name
 from husky_sim.runs.scenario import (
@@ -85,7 +86,7 @@ def _base_for(path: tuple) -> dict[str, Any]:
     if path[:2] == ("robot", "yaw_response"):  # optional; when given, both of its numbers are required
         data["robot"]["yaw_response"] = {"gain": 0.5, "time_constant_s": 0.5}
     if path[:2] == ("controller", "husky_cbf"):  # optional, as are all of its settings
-        data["controller"] = {"husky_cbf": {"guidance": {}, "escape": {}}}
+        data["controller"] = {"husky_cbf": {name: {} for name in nested_settings(HuskyCBFConfig)}}
         if isinstance(path[-1], int):  # an entry of a tuple setting: the whole tuple, as its default
             data["controller"]["husky_cbf"][path[2]] = list(getattr(HuskyCBFConfig, path[2]))
     return scenario_from_data(data).model_dump(mode="json")

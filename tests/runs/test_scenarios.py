@@ -9,8 +9,7 @@ import pytest
 import yaml
 
 from controllers import NMPCConfig
-from controllers.husky_cbf import HuskyCBFConfig
-from controllers.husky_cbf.config import EscapeConfig, GuidanceConfig
+from controllers.husky_cbf.config import MoverConfig, PlannerConfig, RecoveryConfig
 from husky_sim.cli import main
 from husky_sim.runs.scenario import ScenarioError, load_scenario, scenario_from_data, shipped_scenarios
 from husky_sim.sim.episode import EpisodeConfig
@@ -183,7 +182,7 @@ def test_an_omitted_setting_takes_the_run_time_default() -> None:
 
 
 def test_a_scenario_sets_husky_cbfs_own_settings_within_their_ranges() -> None:
-    """`controller.husky_cbf` reaches husky-cbf's config (nested guidance and escape included);
+    """`controller.husky_cbf` reaches husky-cbf's config (nested planner and recovery included);
     what it omits keeps the config's default; a value outside the config's range, or a name the
     config lacks, is one line naming it."""
     data = {
@@ -195,21 +194,22 @@ def test_a_scenario_sets_husky_cbfs_own_settings_within_their_ranges() -> None:
             "husky_cbf": {
                 "margin_m": 0.2,
                 "terminal_weight": [1.0, 2.0, 3.0],
-                "guidance": {"lookahead_m": 2.0},
-                "escape": {"enabled": False, "idle_s": 1.0},
+                "planner": {"lookahead_m": 2.0},
+                "recovery": {"enabled": False, "idle_s": 1.0},
             }
         },
     }
     config = scenario_from_data(data, "test").controller_config("husky-cbf")
     assert (config.margin_m, config.terminal_weight) == (0.2, (1.0, 2.0, 3.0))
-    assert config.guidance.lookahead_m == 2.0 and config.guidance == GuidanceConfig(lookahead_m=2.0)
-    assert config.escape == EscapeConfig(enabled=False, idle_s=1.0)
-    assert config.mover_sweep_s == HuskyCBFConfig.mover_sweep_s
+    assert config.planner.lookahead_m == 2.0 and config.planner == PlannerConfig(lookahead_m=2.0)
+    assert config.recovery == RecoveryConfig(enabled=False, idle_s=1.0)
+    assert config.movers == MoverConfig()  # omitted: the defaults
     for settings, needle in (
         ({"margin_m": 3.0}, "controller.husky_cbf.margin_m: must be a finite number in [0, 2] m"),
         ({"slots": 0}, "controller.husky_cbf.slots: must be an integer in [1, 64]"),
-        ({"guidance": {"lookahead": 2.0}}, "controller.husky_cbf.guidance.lookahead"),
-        ({"escape": {"enabled": 1}}, "controller.husky_cbf.escape.enabled"),
+        ({"planner": {"lookahead": 2.0}}, "controller.husky_cbf.planner.lookahead"),
+        ({"recovery": {"enabled": 1}}, "controller.husky_cbf.recovery.enabled"),
+        ({"guidance": {"lookahead_m": 2.0}}, "controller.husky_cbf.guidance"),
     ):
         data["controller"]["husky_cbf"] = settings
         with pytest.raises(ScenarioError) as exc:
