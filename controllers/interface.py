@@ -51,8 +51,8 @@ class ControlResult:
     #: the deadlock recovery's phase this step ("" when none; husky-cbf's behaviours/recovery.py):
     #: the controller found itself making no progress and follows a recovery waypoint
     escape: str = ""
-    #: a safety filter replaced the controller's command with its backup (husky-cbf's
-    #: safety_filter.py): the command's braking manoeuvre was predicted to touch an obstacle
+    #: a safety filter sent another command than the plan's first (husky-cbf's safety_filter.py):
+    #: no cut of the plan passed its check, so the committed trajectory or a braking backup went
     filtered: bool = False
 
     @property

@@ -11,8 +11,9 @@ The policy, in order:
    trajectory while the planner detours (the way round already is the way out).
 3. The behaviour's target, unless stepping aside:
    - a slow trajectory: YIELD, wait beside the point for a mover on course to it (the point
-     approach then leads to the waiting spot); else APPROACH the point (PointApproach); and, at
-     the point, YIELD by bracing across a mover's track (BraceAcross), which overrides both;
+     approach then leads to the waiting spot); else APPROACH the point (PointApproach), and, at
+     the point, YIELD by bracing across a mover's track (BraceAcross), which overrides the
+     approach (waiting beside the point comes first);
    - a set-point: APPROACH along the goal's line (SetPointApproach);
    - a trajectory: none.
 4. DETOUR: the planner's waypoint towards that target (or the goal), when the straight way is
@@ -37,10 +38,10 @@ from controllers.husky_cbf.planner import Planner
 
 
 class Mode(Enum):
-    """What the target the NMPC tracks comes from, in the policy's order of precedence."""
+    """What the target the NMPC tracks comes from (the module docstring gives the policy's order)."""
 
-    RECOVER = "recover"  # recovery from a stall (behaviours.recovery)
     YIELD = "yield"  # out of a mover's way (behaviours.yield_to_movers)
+    RECOVER = "recover"  # recovery from a stall (behaviours.recovery)
     APPROACH = "approach"  # onto a set-point's line, or at a slow trajectory's point
     DETOUR = "detour"  # the planner's waypoint round a blocked straight way
     TRACK = "track"  # the reference itself

@@ -358,8 +358,9 @@ class HuskyCBFConfig:
     )
     safety_filter: bool = flag(
         True,
-        doc="send a command only as the start of a trajectory that brakes to a stand clear of "
-        "every obstacle's prediction (safety_filter.py); off: the NMPC's command as it is",
+        doc="check each plan's braking tail against every obstacle's prediction before its "
+        "first command is sent, else send a checked fallback (safety_filter.py); off: the NMPC's "
+        "command as it is",
     )
     movers: MoverConfig = field(default_factory=MoverConfig)
     planner: PlannerConfig = field(default_factory=PlannerConfig)

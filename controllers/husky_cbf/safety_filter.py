@@ -60,9 +60,10 @@ STANDING_RADPS = 0.05
 
 @dataclass(frozen=True)
 class FilterVerdict:
-    """The command to send, whether it differs from the NMPC's first command (the filter
-    intervened), and the smallest clearance (m) of the checked trajectory it begins (negative: a
-    predicted contact)."""
+    """The command to send; whether the filter intervened (no cut of the plan passed the check:
+    the command is the committed trajectory's, a braking backup's, or an evasion's checked against
+    the movers' ungrown tracks only); and the smallest clearance (m) of the trajectory it begins,
+    as checked (negative: a predicted contact)."""
 
     command: np.ndarray
     intervened: bool
@@ -81,7 +82,7 @@ class SafetyFilter:
         disc_radius_m: float,
         mover_accel_bound_mps2: float,
         lead_s: float,
-        threat_horizon_s: float = 0.0,
+        threat_horizon_s: float,
     ) -> None:
         self._r = response
         self._tau_s = tau_s
@@ -128,10 +129,6 @@ class SafetyFilter:
         periods = max(math.ceil(abs(float(z0[3])) / (self._r.max_linear_accel_mps2 * self._tau_s)), 1)
         return [np.zeros((0, 2)), np.tile([0.0, float(z0[4])], (periods, 1))]
 
-    def backup(self, z0: np.ndarray, command: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
-        """`command` held one control period (None: none), then braking: manoeuvre()."""
-        return self.manoeuvre(z0, None if command is None else np.asarray(command).reshape(1, 2))
-
     def clearance(
         self,
         times_s: np.ndarray,
@@ -146,6 +143,8 @@ class SafetyFilter:
             return math.inf
         bound_mps2 = self._accel_bound if accel_bound_mps2 is None else accel_bound_mps2
         data = np.array([(o.x_m, o.y_m, o.vx_mps, o.vy_mps, o.radius_m) for o in obstacles])
+        if not (np.all(np.isfinite(data)) and np.all(np.isfinite(poses))):
+            return -math.inf  # what cannot be checked does not pass
         since = self._lead_s + times_s  # time since the measurement (s), (T,)
         speed = np.hypot(data[:, 2], data[:, 3])
         growth = np.where(speed > 0.0, 0.5 * bound_mps2 * since[-1] ** 2, 0.0)
@@ -166,35 +165,37 @@ class SafetyFilter:
 
     def filter(self, z0: np.ndarray, plan: np.ndarray, obstacles: Sequence[Obstacle]) -> FilterVerdict:
         """The command to send now, given the NMPC's planned commands `plan` ((k, 2) [v, omega]
-        per control period, or one (2,) command): its first, if a cut of the plan passes the check
-        (the longest becomes the committed trajectory); else the committed trajectory's next
-        command if it still passes; else the braking manoeuvre that keeps the most clearance.
-        Where that manoeuvre would stand in a mover's way (a mover's track reaches it within the
-        threat horizon), a cut of the plan that clears the movers' tracks without their growth is
-        sent instead, if one does."""
+        per control period, one (2,) command, or none): its first, if a cut of the plan passes the
+        check (the longest becomes the committed trajectory); else, where the fallback below would
+        stand in a mover's way (a mover's track reaches it within the threat horizon), the longest
+        cut of the plan that clears the movers' tracks without their growth; else the committed
+        trajectory's next command if it still passes; else the braking manoeuvre that keeps the
+        most clearance. A plan that is not finite has no cut that passes."""
         plan = np.asarray(plan, dtype=float).reshape(-1, 2)
+        if not (np.all(np.isfinite(plan)) and np.all(np.isfinite(z0))):
+            plan = np.zeros((0, 2))
         cut = self._longest_clear_cut(z0, plan, obstacles, self._accel_bound)
         if cut is not None:
-            k, kept = cut
+            k, clearance_m = cut
             self._committed = plan[1:k].copy()
-            return FilterVerdict(plan[0].copy(), False, kept)
-        committed = self._committed
-        kept = self.clearance(*self.manoeuvre(z0, committed), obstacles)
-        if kept < 0.0:
-            options = [(kept, committed)]
+            return FilterVerdict(plan[0].copy(), False, clearance_m)
+        chosen = self._committed
+        clearance_m = self.clearance(*self.manoeuvre(z0, chosen), obstacles)
+        if clearance_m < 0.0:
+            options = [(clearance_m, chosen)]
             for backup in self._braking(z0):
                 options.append((self.clearance(*self.manoeuvre(z0, backup), obstacles), backup))
-            kept, committed = max(options, key=lambda option: option[0])
-        times, poses = self.manoeuvre(z0, committed)
+            clearance_m, chosen = max(options, key=lambda option: option[0])
+        times, poses = self.manoeuvre(z0, chosen)
         if self._hit_standing(times[-1], poses[-1], obstacles):
             cut = self._longest_clear_cut(z0, plan, obstacles, 0.0)
             if cut is not None:
-                k, kept = cut
+                k, evading_m = cut
                 self._committed = plan[1:k].copy()
-                return FilterVerdict(plan[0].copy(), False, kept)
-        command = committed[0].copy() if len(committed) else np.zeros(2)
-        self._committed = committed[1:].copy()
-        return FilterVerdict(command, not np.allclose(command, plan[0]), kept)
+                return FilterVerdict(plan[0].copy(), True, evading_m)
+        command = chosen[0].copy() if len(chosen) else np.zeros(2)
+        self._committed = chosen[1:].copy()
+        return FilterVerdict(command, True, clearance_m)
 
     def _longest_clear_cut(
         self, z0: np.ndarray, plan: np.ndarray, obstacles: Sequence[Obstacle], accel_bound: float

@@ -205,7 +205,7 @@ class EpisodeMetrics:
     collision_at_fault: bool | None = None  # the robot moved faster than AT_FAULT_SPEED_MPS into it
     collision_obstacle: int | None = None  # index of the obstacle touched; None for a wall
     collision_relative_speed_mps: float | None = None  # |robot velocity - touched body's velocity|
-    #: steps whose command a safety filter replaced with its braking backup (husky-cbf's)
+    #: steps whose command a safety filter replaced with its committed or braking backup (husky-cbf's)
     filter_interventions: int = 0
 
     def as_dict(self) -> dict[str, object]:

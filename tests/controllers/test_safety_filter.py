@@ -23,6 +23,7 @@ DISCS = np.array([-0.33, 0.0, 0.33])
 
 
 def _filter(accel_bound: float = 0.5, lead_s: float = 0.0, threat_s: float = 0.0) -> SafetyFilter:
+    """A filter for the test robot; threat_s 0: standing is always a refuge."""
     return SafetyFilter(RESPONSE, 0.1, DISCS, 0.38, accel_bound, lead_s, threat_s)
 
 
@@ -32,12 +33,12 @@ def _moving_at(v_mps: float) -> np.ndarray:
 
 
 def test_the_backup_holds_the_command_one_period_then_brakes_to_a_stand_at_the_drive_s_limit() -> None:
-    times, poses = _filter().backup(_moving_at(1.0), np.array([1.0, 0.0]))
+    times, poses = _filter().manoeuvre(_moving_at(1.0), np.array([[1.0, 0.0]]))
     assert np.all(np.diff(times) > 0)
     # 0.1 s at 1 m/s, then v^2 / (2 a) = 0.5 m of braking at 1 m/s^2
-    assert poses[-1, 0] == np.float64(poses[-1, 0]) and 0.55 <= poses[-1, 0] <= 0.65
+    assert 0.55 <= poses[-1, 0] <= 0.65 and abs(poses[-1, 1]) < 1e-12
     assert 1.0 <= times[-1] <= 1.2
-    _, braking = _filter().backup(_moving_at(1.0), None)
+    _, braking = _filter().manoeuvre(_moving_at(1.0), None)
     assert 0.45 <= braking[-1, 0] <= 0.55
 
 
@@ -50,7 +51,11 @@ def test_a_clear_way_keeps_the_command_and_a_post_within_the_stopping_distance_b
     near = [Obstacle(1.55, 0.0, 0.3)]
     verdict = _filter().filter(_moving_at(1.0), command, near)
     assert verdict.intervened and np.array_equal(verdict.command, np.zeros(2))
-    assert verdict.clearance_m > 0 > _filter().clearance(*_filter().backup(_moving_at(1.0), command), near)
+    assert (
+        verdict.clearance_m
+        > 0
+        > _filter().clearance(*_filter().manoeuvre(_moving_at(1.0), command[None]), near)
+    )
 
 
 def test_a_mover_on_course_to_the_way_is_braked_for_and_one_walking_away_is_not() -> None:
@@ -87,11 +92,11 @@ def test_when_no_backup_clears_the_one_that_keeps_more_clearance_is_sent() -> No
     post = [Obstacle(1.5, 0.0, 0.3)]  # within reach of both the command's backup and braking now
     command = np.array([1.0, 0.0])
     f = _filter()
-    kept = f.clearance(*f.backup(_moving_at(1.0), command), post)
-    braking = f.clearance(*f.backup(_moving_at(1.0), None), post)
+    kept = f.clearance(*f.manoeuvre(_moving_at(1.0), command[None]), post)
+    braking = f.clearance(*f.manoeuvre(_moving_at(1.0), None), post)
     verdict = f.filter(_moving_at(1.0), command, post)
     assert kept < 0 and verdict.clearance_m == max(kept, braking) and verdict.intervened
-    assert math.isinf(f.clearance(*f.backup(_moving_at(1.0), command), []))
+    assert math.isinf(f.clearance(*f.manoeuvre(_moving_at(1.0), command[None]), []))
 
 
 def test_the_committed_trajectory_carries_the_robot_when_no_cut_of_a_new_plan_clears() -> None:
@@ -119,6 +124,11 @@ def test_a_longer_cut_passes_only_if_its_whole_manoeuvre_clears() -> None:
     assert f.clearance(*f.manoeuvre(_moving_at(1.0), straight), post) < 0
     verdict = f.filter(_moving_at(1.0), straight, post)
     assert not verdict.intervened and verdict.clearance_m >= 0
+    # the longest cut that passes was committed: more than the first command, less than all ten
+    k = next(
+        k for k in range(10, 0, -1) if f.clearance(*f.manoeuvre(_moving_at(1.0), straight[:k]), post) >= 0
+    )
+    assert 1 < k < 10 and len(f._committed) == k - 1
 
 
 def test_where_standing_is_no_refuge_a_cut_clear_of_the_movers_tracks_is_sent() -> None:
@@ -130,7 +140,19 @@ def test_where_standing_is_no_refuge_a_cut_clear_of_the_movers_tracks_is_sent() 
     assert braking.intervened and np.array_equal(braking.command, np.zeros(2))
     # with a threat horizon over which the walker reaches the standing robot, the evasion goes
     evading = _filter(accel_bound=50.0, threat_s=6.0).filter(standing, reverse, head_on)
-    assert not evading.intervened and np.array_equal(evading.command, reverse[0])
+    assert evading.intervened and np.array_equal(evading.command, reverse[0])  # counted, not checked
     # a walker whose track passes beside the standing robot is no threat: the robot brakes
     passing = [Obstacle(1.2, 1.2, 0.3, -0.6, 0.0)]
-    assert _filter(accel_bound=50.0, threat_s=6.0).filter(standing, reverse, passing).intervened
+    stays = _filter(accel_bound=50.0, threat_s=6.0).filter(standing, reverse, passing)
+    assert stays.intervened and np.array_equal(stays.command, np.zeros(2))
+
+
+def test_what_cannot_be_checked_does_not_pass() -> None:
+    f = _filter()
+    nan_plan = np.full((5, 2), np.nan)
+    verdict = f.filter(_moving_at(0.5), nan_plan, [Obstacle(5.0, 0.0, 0.3)])
+    assert verdict.intervened and np.all(np.isfinite(verdict.command))
+    unmeasured = [Obstacle(float("nan"), 0.0, 0.3)]
+    assert f.clearance(*f.manoeuvre(_moving_at(0.5), None), unmeasured) == -math.inf
+    empty = f.filter(_moving_at(0.5), np.zeros((0, 2)), [])
+    assert empty.intervened and np.array_equal(empty.command, np.zeros(2))

@@ -28,16 +28,12 @@ from husky_sim.sim.ground import load_ground
 pytestmark = pytest.mark.physics  # PyBullet or closed loops throughout (`make test-fast` skips)
 
 UNSEEN = sorted((Path(__file__).parent / "scenarios_unseen").glob("*.yaml"))
-#: the deadlock kinds of issue 32 that husky-cbf's recovery was developed on (seen, tuned against)
+#: the deadlock kinds husky-cbf's recovery was developed on (seen, tuned against)
 DEADLOCK = sorted((Path(__file__).parent / "scenarios_deadlock").glob("*.yaml"))
-#: written before that recovery and run once after it (issue 32's closing note); seen since
+#: written before that recovery and run once after it; seen since
 HELD_OUT = sorted((Path(__file__).parent / "scenarios_held_out").glob("*.yaml"))
 HELD_OUT_HORIZONS = (5, 12)
-#: How the held-out layouts ended on their one run (FATROP or IPOPT as named): measured, strict.
-#: (trap_cup at N = 5 on IPOPT, a timeout 0.063 m from the goal then, reaches it since the settle
-#: holds the goal's heading: a fix traced on that run; crowd_crossing at N = 5, collided on both
-#: backends then, reaches the goal since evasion sees a fast mover as wide as the NMPC does: a
-#: fix traced on paper_dynamic_tracking, not on this layout)
+#: Held-out cells husky-cbf fails (FATROP or IPOPT as named), with the measured outcome: strict.
 FAILING_HELD_OUT: dict[tuple[str, int, str], str] = {}
 HORIZONS = (5, 7, 12)
 
@@ -46,11 +42,8 @@ HORIZONS = (5, 7, 12)
 BACKENDS = ("fatrop", "ipopt")
 
 #: Cells husky-cbf does not pass on the calibrated plant (the default ground, wet_grass), on either
-#: backend (the same outcome on both), with their measured outcomes (FATROP; IPOPT). None now:
-#: gap_with_mover at N = 5 (it crossed the mover's track just ahead of it, slowed to turn for the
-#: goal and was caught) reaches the goal since guidance follows a mover through a gap rather than
-#: turn back for the long way round. Strict: a cell that passes again fails here until its line
-#: is removed.
+#: backend (the same outcome on both), with their measured outcomes (FATROP; IPOPT). Strict: a
+#: cell that passes again fails here until its line is removed.
 FAILING_ON_CALIBRATED_PLANT: dict[tuple[str, int], str] = {}
 
 

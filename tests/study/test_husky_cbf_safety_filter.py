@@ -1,10 +1,9 @@
 """husky-cbf's safety filter in the closed loop: real PyBullet, real solver, a generated layout.
 
-The layout is one the filter was developed on (crossing_walkers, seed 1, layout 1: a walker at
-about 1.3 m/s crosses the robot's way at N = 5). Without the filter husky-cbf drives into the
-walker; with it, it brakes and the walker reaches a robot standing still. If the controller or the
-family changes, pick another layout of the same kind: the test is that the filter turns a contact
-while moving into none while moving, and that the summary counts its interventions."""
+The layout is a generated crossing (crossing_walkers, seed 1, layout 1, N = 5) in which husky-cbf
+without its filter drives into a walker. The test is that the filter turns a contact while moving
+into none while moving, and that the summary counts its interventions; if the controller or the
+family changes so that the unfiltered run no longer collides, pick another layout of the kind."""
 
 from __future__ import annotations
 
