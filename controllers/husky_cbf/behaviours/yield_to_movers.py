@@ -37,7 +37,7 @@ DEAD_AHEAD_M = 0.02
 #: place takes a loaded skid-steer up to that, and must be done before the step aside starts
 BRACE_LEAD_S = 4.0
 #: Below this squared relative speed ((m/s)^2) a mover keeps its distance: no closest approach
-STILL_RELATIVE_MPS2 = 1e-9
+STILL_RELATIVE_SPEED_SQ = 1e-9
 
 
 class SideStep:
@@ -86,7 +86,7 @@ class SideStep:
             rel_p = np.array([ob.x_m, ob.y_m]) - point_xy
             rel_v = np.array([ob.vx_mps, ob.vy_mps]) - velocity
             vv = float(rel_v @ rel_v)
-            t_c = -float(rel_p @ rel_v) / vv if vv > STILL_RELATIVE_MPS2 else 0.0
+            t_c = -float(rel_p @ rel_v) / vv if vv > STILL_RELATIVE_SPEED_SQ else 0.0
             if not 0.0 < t_c < horizon_s:
                 continue
             closest = rel_p + t_c * rel_v
