@@ -139,10 +139,15 @@ class SafetyFilter:
         """The smallest clearance (m) of the body discs along a manoeuvre to the obstacles, movers
         grown at `accel_bound_mps2` (default: the filter's bound; see the module docstring); inf
         when none can come within the manoeuvre's reach."""
-        if not obstacles:
+        return self._clearance(times_s, poses, _obstacle_rows(obstacles), accel_bound_mps2)
+
+    def _clearance(
+        self, times_s: np.ndarray, poses: np.ndarray, data: np.ndarray, accel_bound_mps2: float | None
+    ) -> float:
+        """clearance() against obstacle rows [x, y, vx, vy, r] (_obstacle_rows)."""
+        if len(data) == 0:
             return math.inf
         bound_mps2 = self._accel_bound if accel_bound_mps2 is None else accel_bound_mps2
-        data = np.array([(o.x_m, o.y_m, o.vx_mps, o.vy_mps, o.radius_m) for o in obstacles])
         if not (np.all(np.isfinite(data)) and np.all(np.isfinite(poses))):
             return -math.inf  # what cannot be checked does not pass
         since = self._lead_s + times_s  # time since the measurement (s), (T,)
@@ -174,21 +179,36 @@ class SafetyFilter:
         plan = np.asarray(plan, dtype=float).reshape(-1, 2)
         if not (np.all(np.isfinite(plan)) and np.all(np.isfinite(z0))):
             plan = np.zeros((0, 2))
-        cut = self._longest_clear_cut(z0, plan, obstacles, self._accel_bound)
+        data = _obstacle_rows(obstacles)
+        cuts: dict[int, tuple[np.ndarray, np.ndarray]] = {}  # each cut's manoeuvre, integrated once
+
+        def longest_clear_cut(accel_bound_mps2: float) -> tuple[int, float] | None:
+            """The longest cut k whose manoeuvre clears every obstacle with movers grown at
+            accel_bound_mps2, and its clearance (m); None when no cut does."""
+            for k in range(len(plan), 0, -1):
+                if k not in cuts:
+                    cuts[k] = self.manoeuvre(z0, plan[:k])
+                clearance_m = self._clearance(*cuts[k], data, accel_bound_mps2)
+                if clearance_m >= 0.0:
+                    return k, clearance_m
+            return None
+
+        cut = longest_clear_cut(self._accel_bound)
         if cut is not None:
             k, clearance_m = cut
             self._committed = plan[1:k].copy()
             return FilterVerdict(plan[0].copy(), False, clearance_m)
-        chosen = self._committed
-        clearance_m = self.clearance(*self.manoeuvre(z0, chosen), obstacles)
+        chosen, run = self._committed, self.manoeuvre(z0, self._committed)
+        clearance_m = self._clearance(*run, data, None)
         if clearance_m < 0.0:
-            options = [(clearance_m, chosen)]
+            options = [(clearance_m, chosen, run)]
             for backup in self._braking(z0):
-                options.append((self.clearance(*self.manoeuvre(z0, backup), obstacles), backup))
-            clearance_m, chosen = max(options, key=lambda option: option[0])
-        times, poses = self.manoeuvre(z0, chosen)
-        if self._hit_standing(times[-1], poses[-1], obstacles):
-            cut = self._longest_clear_cut(z0, plan, obstacles, 0.0)
+                backup_run = self.manoeuvre(z0, backup)
+                options.append((self._clearance(*backup_run, data, None), backup, backup_run))
+            clearance_m, chosen, run = max(options, key=lambda option: option[0])
+        times, poses = run
+        if self._hit_standing(times[-1], poses[-1], data):
+            cut = longest_clear_cut(0.0)
             if cut is not None:
                 k, evading_m = cut
                 self._committed = plan[1:k].copy()
@@ -197,27 +217,21 @@ class SafetyFilter:
         self._committed = chosen[1:].copy()
         return FilterVerdict(command, True, clearance_m)
 
-    def _longest_clear_cut(
-        self, z0: np.ndarray, plan: np.ndarray, obstacles: Sequence[Obstacle], accel_bound: float
-    ) -> tuple[int, float] | None:
-        """The longest cut k of `plan` whose manoeuvre clears every obstacle with movers grown at
-        `accel_bound` (m/s^2), and its clearance (m); None when no cut does."""
-        for k in range(len(plan), 0, -1):
-            kept = self.clearance(*self.manoeuvre(z0, plan[:k]), obstacles, accel_bound)
-            if kept >= 0.0:
-                return k, kept
-        return None
-
-    def _hit_standing(self, stand_s: float, pose: np.ndarray, obstacles: Sequence[Obstacle]) -> bool:
-        """Whether a mover at constant velocity (not grown) reaches a body disc of a robot standing
-        at `pose` from `stand_s` (s from z0) within the threat horizon."""
-        movers = [o for o in obstacles if o.vx_mps != 0.0 or o.vy_mps != 0.0]
-        if not movers or self._threat_s <= 0.0:
+    def _hit_standing(self, stand_s: float, pose: np.ndarray, data: np.ndarray) -> bool:
+        """Whether a mover (a row of `data` with a velocity, _obstacle_rows) at constant velocity,
+        not grown, reaches a body disc of a robot standing at `pose` from `stand_s` (s from z0)
+        within the threat horizon."""
+        data = data[(data[:, 2] != 0.0) | (data[:, 3] != 0.0)]
+        if len(data) == 0 or self._threat_s <= 0.0:
             return False
-        data = np.array([(o.x_m, o.y_m, o.vx_mps, o.vy_mps, o.radius_m) for o in movers])
         since = self._lead_s + stand_s + np.arange(0.0, self._threat_s + STEP_S, 5 * STEP_S)
         centres = data[None, :, 0:2] + data[None, :, 2:4] * since[:, None, None]  # (T, M, 2)
         heading = np.array([math.cos(pose[2]), math.sin(pose[2])])
         discs = pose[None, :2] + self._offsets[:, None] * heading[None, :]  # (D, 2)
         gaps = np.linalg.norm(centres[:, :, None, :] - discs[None, None, :, :], axis=3)  # (T, M, D)
         return bool(np.any(gaps < data[None, :, 4, None] + self._disc_radius))
+
+
+def _obstacle_rows(obstacles: Sequence[Obstacle]) -> np.ndarray:
+    """(M, 5) rows [x, y, vx, vy, r] (m, m/s) of the obstacles, read once per filtered step."""
+    return np.array([(o.x_m, o.y_m, o.vx_mps, o.vy_mps, o.radius_m) for o in obstacles]).reshape(-1, 5)
