@@ -24,15 +24,27 @@ Two things make a ROS 2 node of it, as rmw does for its nodes:
 from __future__ import annotations
 
 import os
+import sys
+import tempfile
 from typing import Any
 
 from husky_sim.extras import missing
 from husky_sim.ros2 import messages as msg
+from husky_sim.ros2.dds_config import URI_VARIABLE, DdsConfigError, merged_config, refusal
 from husky_sim.ros2.settings import QOS_PROFILE_NAMES, Ros2Settings
 from husky_sim.ros2.transport import Received, TopicsBySetting
 
 try:
-    from cyclonedds.core import InstanceState, Policy, Qos, ReadCondition, SampleState, ViewState, WaitSet
+    from cyclonedds.core import (
+        DDSException,
+        InstanceState,
+        Policy,
+        Qos,
+        ReadCondition,
+        SampleState,
+        ViewState,
+        WaitSet,
+    )
     from cyclonedds.domain import Domain, DomainParticipant
     from cyclonedds.pub import DataWriter
     from cyclonedds.sub import DataReader
@@ -71,26 +83,6 @@ GRAPH_TOPIC = "ros_discovery_info"
 #: A ROS 2 participant's user data: its security enclave (the root one).
 PARTICIPANT_USER_DATA = b"enclave=/;"
 
-#: Match Fast DDS's endpoints by type name (eProsima's vendor id 1.15; see the module docstring).
-COMPATIBILITY_CONFIG = (
-    '<CycloneDDS><Domain id="any"><Compatibility>'
-    "<IgnoreTypeInformation>1.15</IgnoreTypeInformation>"
-    "</Compatibility></Domain></CycloneDDS>"
-)
-
-#: Cyclone DDS configuration that keeps all traffic on this machine's loopback interface: no
-#: multicast, discovery by unicast to 127.0.0.1. A rehearsal uses it so its /cmd_vel can never
-#: reach a robot on the network. Reliable writers send heartbeats every 5 ms instead of 100 ms,
-#: so a write is acknowledged within about a millisecond: the rehearsal robot waits for the
-#: node's acknowledgement of the obstacles each step, which took 74 ms (median) at the default.
-LOCALHOST_ONLY_CONFIG = """<CycloneDDS><Domain id="any">
-<General><Interfaces><NetworkInterface address="127.0.0.1"/></Interfaces>
-<AllowMulticast>false</AllowMulticast></General>
-<Discovery><ParticipantIndex>auto</ParticipantIndex><MaxAutoParticipantIndex>30</MaxAutoParticipantIndex>
-<Peers><Peer address="127.0.0.1"/></Peers></Discovery>
-<Internal><HeartbeatInterval min="1 ms" minsched="1 ms">5 ms</HeartbeatInterval></Internal>
-</Domain></CycloneDDS>"""
-
 
 def topic_qos(settings: Ros2Settings, topic: str) -> Qos:
     """The QoS of a topic by its setting's stem: `topic_qos(s, "odometry")` -> sensor data by default."""
@@ -102,11 +94,35 @@ def dds_topic_name(ros_topic: str) -> str:
     return "rt" + ros_topic
 
 
-def domain_config(localhost_only: bool, environ: dict[str, str] | None = None) -> str:
-    """Cyclone DDS's configuration for a domain: the user's (CYCLONEDDS_URI) first, then ours."""
-    user = (os.environ if environ is None else environ).get("CYCLONEDDS_URI", "").strip()
-    ours = [COMPATIBILITY_CONFIG, *([LOCALHOST_ONLY_CONFIG] if localhost_only else [])]
-    return ",".join([user, *ours] if user else ours)
+def open_domain(domain_id: int, localhost_only: bool) -> Domain:
+    """Configure a DDS domain for this process (husky_sim.ros2.dds_config: the user's
+    CYCLONEDDS_URI, then ours). Cyclone DDS's own diagnostics (written to stderr) become a
+    one-line DdsConfigError when it refuses the configuration; a notice names what was set aside."""
+    merged = merged_config(localhost_only)
+    sys.stderr.flush()
+    saved = os.dup(2)
+    with tempfile.TemporaryFile() as log:
+        os.dup2(log.fileno(), 2)
+        try:
+            domain = Domain(domain_id, merged.xml)
+            error = None
+        except DDSException as exc:
+            error = exc
+        finally:
+            os.dup2(saved, 2)
+            os.close(saved)
+        log.seek(0)
+        said = log.read().decode(errors="replace")
+    if error is not None:
+        raise DdsConfigError(
+            f"{URI_VARIABLE}: Cyclone DDS refused the configuration ({refusal(said)}); "
+            f"fix it or unset {URI_VARIABLE}"
+        ) from None
+    if said:
+        sys.stderr.write(said)
+    if merged.notice():
+        print(merged.notice(), file=sys.stderr, flush=True)
+    return domain
 
 
 #: Domains this process configured, by id (one configuration per id and process, kept for the
@@ -152,7 +168,7 @@ class CycloneTransport(TopicsBySetting):
         self.messages = msg.cyclone_kit(settings.ros_distro)
         domain_id = settings.resolved_domain_id()
         if domain_id not in _CONFIGURED_DOMAINS:
-            _CONFIGURED_DOMAINS[domain_id] = Domain(domain_id, domain_config(settings.localhost_only))
+            _CONFIGURED_DOMAINS[domain_id] = open_domain(domain_id, settings.localhost_only)
         self.participant = DomainParticipant(domain_id, qos=Qos(Policy.Userdata(PARTICIPANT_USER_DATA)))
         self._topics: dict[str, Topic] = {}
         self._readers: list[DataReader] = []
