@@ -48,8 +48,8 @@ def _add_ros2_arguments(parser: argparse.ArgumentParser) -> None:
         "--ros-distro",
         choices=ROS_DISTRO_NAMES,
         default=None,
-        help="message definitions on the wire (Cyclone DDS transport; the graph's gids differ: "
-        f"Humble's are 24 bytes, later ones' 16); default {ROS_DISTRO_NAMES[0]}",
+        help="the ROS 2 distribution whose graph layout the node announces in (Humble's gids are "
+        "24 bytes, later ones' 16; Cyclone DDS transport); default: the peers', from discovery data",
     )
     parser.add_argument(
         "--cmd-vel-stamped",

@@ -19,6 +19,16 @@ Two things make a ROS 2 node of it, as rmw does for its nodes:
   (rmw_dds_common/ParticipantEntitiesInfo: the participant's gid, and per node its name and the
   gids of its readers and writers); the transport announces its node there each time it adds a
   reader or writer, so `ros2 node list` and rclpy's graph queries list it with its topics.
+
+The graph's gid is 24 bytes in Humble and 16 from Iron on (Jazzy, Kilted), and a peer reads only
+its own distribution's layout. Unless a distribution is given (`ros_distro`), the transport
+follows its peers: it announces in Humble's layout (which a newer peer reads as the same
+participant with no node, while the reverse would give a Humble peer a garbled one), and from the
+first peer's `ros_discovery_info` writer it sees in discovery data (DCPSPublication) on, in that
+peer's: from Iron on, ROS 2's endpoints carry `typehash=` (REP 2011's type hashes) in their user
+data; Humble's carry none. The messages of the node's own topics are the same on the wire in every
+distribution (tests/ros2/test_rclpy.py). ROS 2 does not support mixed distributions on one domain:
+the first peer decides, and a later peer of another layout is named in one line on stderr.
 """
 
 from __future__ import annotations
@@ -35,6 +45,7 @@ from husky_sim.ros2.settings import QOS_PROFILE_NAMES, Ros2Settings
 from husky_sim.ros2.transport import Received, TopicsBySetting
 
 try:
+    from cyclonedds.builtin import BuiltinDataReader, BuiltinTopicDcpsPublication
     from cyclonedds.core import (
         DDSException,
         InstanceState,
@@ -82,6 +93,15 @@ GRAPH_QOS = Qos(
 GRAPH_TOPIC = "ros_discovery_info"
 #: A ROS 2 participant's user data: its security enclave (the root one).
 PARTICIPANT_USER_DATA = b"enclave=/;"
+#: What a ROS 2 endpoint's user data holds from Iron on (REP 2011), and Humble's never.
+TYPE_HASH_USER_DATA = b"typehash="
+#: The graph's layouts: Humble's 24-byte gids and the 16-byte ones of every later distribution.
+HUMBLE_GRAPH, LATER_GRAPH = "humble", "kilted"
+
+
+def graph_layout(user_data: bytes | None) -> str:
+    """The graph layout of a ROS 2 peer, from the user data of its ros_discovery_info writer."""
+    return LATER_GRAPH if user_data and TYPE_HASH_USER_DATA in user_data else HUMBLE_GRAPH
 
 
 def topic_qos(settings: Ros2Settings, topic: str) -> Qos:
@@ -165,7 +185,7 @@ class CycloneTransport(TopicsBySetting):
 
     def __init__(self, settings: Ros2Settings) -> None:
         self.settings = settings
-        self.messages = msg.cyclone_kit(settings.ros_distro)
+        self.messages = msg.cyclone_kit(settings.ros_distro or msg.DEFAULT_DISTRO)
         domain_id = settings.resolved_domain_id()
         if domain_id not in _CONFIGURED_DOMAINS:
             _CONFIGURED_DOMAINS[domain_id] = open_domain(domain_id, settings.localhost_only)
@@ -174,17 +194,22 @@ class CycloneTransport(TopicsBySetting):
         self._readers: list[DataReader] = []
         self._writers: list[DataWriter] = []
         self._waitset = WaitSet(self.participant)
-        graph_type = msg.message_type(msg.PARTICIPANT_ENTITIES_INFO, settings.ros_distro)
-        self._graph = DataWriter(
-            self.participant, Topic(self.participant, GRAPH_TOPIC, graph_type), qos=GRAPH_QOS
+        #: The graph layout announced in (a distribution's name); None until a peer decides it.
+        self.graph_distro = settings.ros_distro
+        self._publications = (
+            BuiltinDataReader(self.participant, BuiltinTopicDcpsPublication)
+            if settings.ros_distro is None
+            else None
         )
+        self._mixed_reported = False
+        self._open_graph(settings.ros_distro or HUMBLE_GRAPH)
 
     def _topic(self, ros_topic: str, ros_type: str) -> Topic:
         if ros_topic not in self._topics:
             self._topics[ros_topic] = Topic(
                 self.participant,
                 dds_topic_name(ros_topic),
-                msg.message_type(ros_type, self.settings.ros_distro),
+                msg.message_type(ros_type, self.settings.ros_distro or msg.DEFAULT_DISTRO),
             )
         return self._topics[ros_topic]
 
@@ -203,21 +228,58 @@ class CycloneTransport(TopicsBySetting):
 
     def wait(self, timeout_s: float) -> None:
         self._waitset.wait(duration(milliseconds=max(1, round(1000 * timeout_s))))
+        self._follow_peers()
 
     def close(self) -> None:
         """Nothing to release by hand: Cyclone DDS deletes the entities with their Python objects."""
 
     # -- the ROS graph ---------------------------------------------------------------------------
+    def _open_graph(self, layout: str) -> None:
+        """The ros_discovery_info writer in a layout (a distribution's name), replacing any other."""
+        self._graph_kit = msg.cyclone_kit(layout)
+        graph_type = msg.message_type(msg.PARTICIPANT_ENTITIES_INFO, layout)
+        self._graph = DataWriter(
+            self.participant, Topic(self.participant, GRAPH_TOPIC, graph_type), qos=GRAPH_QOS
+        )
+        self._graph_layout = layout
+
+    def _follow_peers(self) -> None:
+        """Take the discovery data of peers' ros_discovery_info writers: the first decides the
+        layout this node is announced in (re-announced at once when it differs)."""
+        if self._publications is None:
+            return
+        for sample in self._publications.take(N=64):
+            if (
+                getattr(sample, "topic_name", None) != GRAPH_TOPIC
+                or sample.participant_key == self.participant.guid
+            ):
+                continue
+            user_data = sample.qos[Policy.Userdata] if sample.qos else None
+            layout = graph_layout(user_data.data if user_data else None)
+            if self.graph_distro is None:
+                self.graph_distro = layout
+                if layout != self._graph_layout:
+                    self._open_graph(layout)
+                    self._announce()
+            elif layout != self.graph_distro and not self._mixed_reported:
+                self._mixed_reported = True
+                print(
+                    f"ROS graph: peers of both layouts on one domain ({HUMBLE_GRAPH} and later); this node "
+                    f"stays announced in the first peer's ({self.graph_distro}); --ros-distro chooses",
+                    file=sys.stderr,
+                    flush=True,
+                )
+
     def _gid(self, entity: Any) -> Any:
         """rmw_dds_common/Gid of a DDS entity: its GUID's 16 bytes (zero-padded to Humble's 24)."""
-        gid = self.messages.make("rmw_dds_common/msg/Gid")
+        gid = self._graph_kit.make("rmw_dds_common/msg/Gid")
         raw = list(entity.guid.bytes)
         gid.data = raw + [0] * (len(gid.data) - len(raw))
         return gid
 
     def _announce(self) -> None:
         """Publish this participant's one node, its readers and writers, on ros_discovery_info."""
-        kit = self.messages
+        kit = self._graph_kit
         node = kit.make(
             "rmw_dds_common/msg/NodeEntitiesInfo",
             node_namespace="/",

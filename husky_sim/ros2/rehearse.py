@@ -42,23 +42,16 @@ def rehearse(
     cmd_vel_stamped: bool = False,
 ) -> dict[str, object]:
     """Run the rehearsal; return the summary (also written to out_dir/summary.json). `transport`
-    is the node's (the robot's side is Cyclone DDS); with rclpy, the robot speaks the installed
-    ROS 2 distribution's definitions."""
+    is the node's (the robot's side is Cyclone DDS, announced in the graph layout of its peer)."""
     prepare_out_dir(out_dir)
     (out_dir / SUMMARY_FILE).unlink(missing_ok=True)  # only this rehearsal's may get its transport
     # by default a domain of its own: apart from ROS 2's default 0 and from other rehearsals
     domain = lease_domain_id() if domain_id is None else check_domain_id(domain_id, "--domain-id")
-    distro = Ros2Settings.ros_distro
-    if transport == "rclpy":
-        from husky_sim.ros2.rclpy_transport import installed_distro
-
-        distro = installed_distro()
     settings = Ros2Settings(
         use_sim_time=True,
         domain_id=domain,
         localhost_only=True,
         cmd_vel_stamped=cmd_vel_stamped,
-        ros_distro=distro,
     )
     scenario_file = out_dir / "scenario.yaml"
     scenario_file.write_text(
@@ -68,7 +61,7 @@ def rehearse(
     command = [
         sys.executable, "-m", "husky_sim.cli", "serve", str(scenario_file), "--controller", controller,
         "--use-sim-time", "--localhost-only", "--domain-id", str(domain), "--out", str(node_dir),
-        "--transport", transport, "--ros-distro", distro, *(["--cmd-vel-stamped"] if cmd_vel_stamped else []),
+        "--transport", transport, *(["--cmd-vel-stamped"] if cmd_vel_stamped else []),
     ]  # fmt: skip
     run, _ = run_settings(sc, controller)
     robot = DdsRobot(settings, sc.tau_s, run.horizon, reply_timeout_s)

@@ -20,7 +20,8 @@ QOS_PROFILE_NAMES = ("sensor_data", "default", "clock")
 TRANSPORTS = ("cyclonedds", "rclpy")
 
 #: Distributions whose message definitions the Cyclone DDS transport can speak
-#: (husky_sim.ros2.messages.ROS_DISTROS has their type stores; the first is the default).
+#: (husky_sim.ros2.messages.ROS_DISTROS has their type stores; the first is the default for the
+#: node's own topics, whose messages are the same on the wire in all of them).
 ROS_DISTRO_NAMES = ("humble", "jazzy", "kilted")
 
 
@@ -92,7 +93,8 @@ class Ros2Settings:
     use_sim_time: bool = False  # the node's clock is /clock (a simulator) instead of the wall clock
     cmd_vel_stamped: bool = False  # geometry_msgs/TwistStamped on cmd_vel (Jazzy's diff-drive)
     node_name: str = "husky_sim_controller"  # the node's name in the ROS graph
-    ros_distro: str = ROS_DISTRO_NAMES[0]  # message definitions on the wire (Cyclone DDS transport)
+    # the graph's layout and message definitions (Cyclone DDS transport); None: follow the peers
+    ros_distro: str | None = None
     domain_id: int | None = None
     localhost_only: bool = False  # keep DDS traffic on 127.0.0.1 (rehearsals)
 
@@ -114,7 +116,7 @@ class Ros2Settings:
                 "node_name: expected a ROS 2 node name like husky_sim_controller, "
                 f"got {self.node_name[:40]!r}"
             )
-        if self.ros_distro not in ROS_DISTRO_NAMES:
+        if self.ros_distro is not None and self.ros_distro not in ROS_DISTRO_NAMES:
             raise ValueError(
                 f"ros_distro: expected one of {', '.join(ROS_DISTRO_NAMES)}, "
                 f"got {str(self.ros_distro)[:40]!r}"

@@ -142,12 +142,58 @@ def test_every_message_both_ways_with_every_qos_profile() -> None:
         assert got[name] == wire, name
 
 
+def test_the_graph_follows_the_peers_layout(capsys) -> None:
+    """No distribution given: our node announces itself in the graph layout of the first ROS 2
+    peer it discovers. A Humble-layout peer (endpoints without `typehash=`) keeps Humble's 24-byte
+    gids; rclpy (the Kilted wheels, Fast DDS) then gets a one-line notice of mixed layouts. With
+    rclpy first, the node switches to 16-byte gids and rclpy's graph lists it with its topic."""
+    domain = _domain()
+    humble = CycloneTransport(
+        Ros2Settings(domain_id=domain, localhost_only=True, node_name="old", ros_distro="humble")
+    )
+    first = CycloneTransport(Ros2Settings(domain_id=domain, localhost_only=True, node_name="first"))
+    end = time.monotonic() + 20
+    while first.graph_distro is None and time.monotonic() < end:
+        first.wait(0.05)
+    assert first.graph_distro == "humble" and humble.graph_distro == "humble"
+
+    domain = _domain()
+    ours = CycloneTransport(Ros2Settings(domain_id=domain, localhost_only=True, node_name="follower"))
+    ours.publish("cmd_vel", "geometry_msgs/msg/Twist")
+    assert ours.graph_distro is None
+    ros = RclpyTransport(Ros2Settings(domain_id=domain, localhost_only=True, node_name="probe"))
+    try:
+        listed: list = []
+        end = time.monotonic() + 30
+        while not listed and time.monotonic() < end:
+            ours.wait(0.05)
+            ros.wait(0.05)
+            if ("follower", "/") in ros.node.get_node_names_and_namespaces():
+                listed = ros.node.get_publisher_names_and_types_by_node("follower", "/")
+        assert ours.graph_distro == "kilted" == installed_distro()
+        assert ("/cmd_vel", ["geometry_msgs/msg/Twist"]) in listed
+        # the Humble-layout domain meets a later peer: named, not followed
+        late = RclpyTransport(
+            Ros2Settings(domain_id=first.settings.domain_id, localhost_only=True, node_name="late")
+        )
+        try:
+            end = time.monotonic() + 20
+            while "peers of both layouts" not in capsys.readouterr().err and time.monotonic() < end:
+                first.wait(0.05)
+                late.wait(0.0)
+            assert first.graph_distro == "humble" and time.monotonic() < end
+        finally:
+            late.close()
+    finally:
+        ros.close()
+
+
 def _serve(tmp_path: Path, domain: int, transport: str, duration_s: float, *extra: str) -> subprocess.Popen:
     command = [
         sys.executable, "-m", "husky_sim.cli", "serve", "husky_point_stabilisation",
         "--controller", "husky-cbf", "--horizon", "5", "--domain-id", str(domain), "--localhost-only",
         "--duration", str(duration_s),
-        "--transport", transport, "--ros-distro", installed_distro(), "--out", str(tmp_path / "node"), *extra,
+        "--transport", transport, "--out", str(tmp_path / "node"), *extra,
     ]  # fmt: skip
     return subprocess.Popen(command, stdout=(tmp_path / "serve.out").open("wb"), stderr=subprocess.STDOUT)
 
@@ -182,7 +228,8 @@ def test_an_rclpy_robot_is_driven_to_the_goal_and_sees_the_nodes_safety(
     zero commands (the node ends at 20 s of its own, the robot at 24 s: plenty of slack for start-up
     and discovery); the node's end, a last zero. rclpy's graph lists the node and its topics."""
     domain = _domain()
-    flags = ["--cmd-vel-stamped"] if stamped else []
+    # no --ros-distro: the graph follows the robot's; the stamped run gives it as an override
+    flags = ["--cmd-vel-stamped", "--ros-distro", installed_distro()] if stamped else []
     node = _serve(tmp_path, domain, transport, 20.0, *flags)
     try:
         silence = ["--silent-from", "14", "--silent-for", "2"]
