@@ -97,6 +97,7 @@ PARTICIPANT_USER_DATA = b"enclave=/;"
 TYPE_HASH_USER_DATA = b"typehash="
 #: The graph's layouts: Humble's 24-byte gids and the 16-byte ones of every later distribution.
 HUMBLE_GRAPH, LATER_GRAPH = "humble", "kilted"
+LAYOUT_NAMES = {HUMBLE_GRAPH: "Humble's (24-byte gids)", LATER_GRAPH: "Iron's and later (16-byte gids)"}
 
 
 def graph_layout(user_data: bytes | None) -> str:
@@ -261,6 +262,7 @@ class CycloneTransport(TopicsBySetting):
                 if layout != self._graph_layout:
                     self._open_graph(layout)
                     self._announce()
+                print(f"ROS graph: announced in the peers' layout, {LAYOUT_NAMES[layout]}", flush=True)
             elif layout != self.graph_distro and not self._mixed_reported:
                 self._mixed_reported = True
                 print(

@@ -12,6 +12,9 @@ answers) on /cmd_vel once per tau and the plan as nav_msgs/Path.
 A control step runs on the first odometry sample at least tau (of odometry stamps) after the
 previous step's. Safety, each event counted and logged as a row of `serve.csv`:
 - `stale`: no odometry newer than 2 tau on the node's clock -> zero command, once per tau;
+- `blind`: an obstacle publisher is matched but none of its MarkerArrays has arrived yet -> zero
+  command instead of a plan that ignores obstacles the robot reports (a reliable writer's first
+  samples can reach a newly joined reader a heartbeat period late);
 - `brake`: the controller fell back to braking (or raised: also counted as `error`) -> zero
   command;
 - `overrun`: the solve took longer than tau (or a smaller budget; wall time: what the robot's
@@ -67,7 +70,7 @@ SERVE_LOG_COLUMNS = (
     "solve_ms",
     "odom_latency_ms",
 )
-EVENTS = ("command", "stale", "brake", "overrun", "shutdown")  # one per serve.csv row
+EVENTS = ("command", "stale", "blind", "brake", "overrun", "shutdown")  # one per serve.csv row
 #: Counted apart (the same step is also a `brake` row): the controller raised instead of returning.
 ERROR = "error"
 #: The controller's own counts, under the names of a run's summary (husky_sim.sim.metrics): only the
@@ -90,11 +93,13 @@ class ObstacleTracker:
     def __init__(self) -> None:
         # (ns, id) -> [stamp s, x m, y m, radius m, vx m/s, vy m/s]
         self._tracks: dict[tuple[str, int], list[float]] = {}
+        self.arrays_received = 0  # MarkerArrays taken, empty ones included
 
     def update(self, array: object, frame_id: str) -> int:
         """Take a MarkerArray; return how many markers were refused for another frame than
         frame_id (there is no tf here to move them into it)."""
         refused = 0
+        self.arrays_received += 1
         for marker in array.markers:
             key = (marker.ns, marker.id)
             if marker.header.frame_id not in ("", frame_id):
@@ -277,6 +282,19 @@ class ControllerNode:
             return  # arrived too late to act on: the watchdog stops the robot
         p = odom.pose.pose
         state = np.array([p.position.x, p.position.y, msg.quaternion_yaw(p.orientation)])
+        if not self._tracker.arrays_received and self._markers.publishers():
+            self._publish_twist(np.zeros(2), stamp)
+            self._log_row(
+                "blind",
+                f"{self.settings.obstacles_topic}: a publisher is matched, no obstacles from it yet",
+                np.zeros(2),
+                odom_stamp_s=stamp,
+                x_m=float(state[0]),
+                y_m=float(state[1]),
+                yaw_rad=float(state[2]),
+                odom_latency_ms=latency_ms,
+            )
+            return
         if self._t0 is None:
             self._t0 = stamp  # wall clock: the reference starts with the first odometry
         t_ref = stamp - self._t0

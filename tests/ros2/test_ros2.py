@@ -244,6 +244,38 @@ def test_node_commands_on_fresh_odometry_and_stops_the_robot_otherwise(
 
 
 @pytest.mark.slow
+def test_the_node_does_not_drive_blind_while_a_matched_obstacle_source_is_silent(
+    husky_cbf, tmp_path: Path
+) -> None:
+    """An obstacle publisher is matched but has sent nothing (its first samples can come a
+    heartbeat period late): fresh odometry gets zero commands and no plan, each a `blind` event;
+    the first MarkerArray (an empty one counts) ends it and the controller drives."""
+    sc, controller = husky_cbf
+    settings = Ros2Settings(domain_id=_domain(), localhost_only=True)
+    robot = _Robot(settings)
+    markers = robot.dds.publish("obstacles", msg.MARKER_ARRAY)
+    node, stop, thread = _start_node(controller, sc.reference_object(), sc.tau_s, settings, tmp_path)
+    _wait_matched(robot, node)
+    end = time.monotonic() + 20
+    while not node._markers.publishers() and time.monotonic() < end:
+        time.sleep(0.02)
+    start = (sc.robot.start.x_m, sc.robot.start.y_m, sc.robot.start.yaw_rad)
+    blind = robot.commands(1.0, odometry=start)
+    assert len(blind) >= 3 and all(t.linear.x == 0 and t.angular.z == 0 for t in blind)
+    assert robot.received(robot.plan) == [] and node.stats.events["blind"] >= 3
+    assert node.stats.events["command"] == 0
+    markers.write(msg.make(msg.MARKER_ARRAY))
+    driven = robot.commands(1.5, odometry=start)
+    stop.set()
+    thread.join(10)
+    assert any(t.linear.x > 0.1 for t in driven) and robot.received(robot.plan)
+    rows = list(csv.DictReader((tmp_path / "serve.csv").open()))
+    assert rows[0]["event"] in ("stale", "blind") and {"blind", "command"} <= {r["event"] for r in rows}
+    first_command = next(i for i, r in enumerate(rows) if r["event"] == "command")
+    assert all(r["event"] != "blind" for r in rows[first_command:])
+
+
+@pytest.mark.slow
 @pytest.mark.parametrize("transport", TRANSPORTS)
 def test_a_solve_longer_than_tau_sends_zero_not_its_plan(husky_cbf, tmp_path: Path, transport: str) -> None:
     """With a solve budget shorter than any solve (1 us), every result is late: each is dropped,
