@@ -171,9 +171,11 @@ class FatropSolver:
         assert names[:2] == ["x0", "p"], names
         self._bound_args = [self._bounds[name] for name in names[2:]]
         self._status = None if library is None else FatropStatus(library)
-        # fallback_max_iter caps the fallback IPOPT (default: options.max_iter), for a caller whose
-        # own next step after a failure is cheaper than IPOPT's full verdict (husky-cbf's hard problem)
-        fallback = options if fallback_max_iter is None else replace(options, max_iter=fallback_max_iter)
+        # fallback_max_iter caps the fallback IPOPT (default: options.max_iter; 0: no fallback),
+        # for a caller whose own next step after a failure is cheaper than IPOPT's full verdict
+        # (husky-cbf's hard problem, followed by its exact-penalty re-solve)
+        self._falls_back = fallback_max_iter != 0
+        fallback = options if not fallback_max_iter else replace(options, max_iter=fallback_max_iter)
         # built on the first fallback: most controllers never fall back, and building IPOPT costs
         # about 9 ms of CPU, a quarter of a paper controller's build
         self._reference_problem = (nlp, fallback)
@@ -198,9 +200,10 @@ class FatropSolver:
         return ""
 
     def solve(self, parameters: np.ndarray, guess: np.ndarray) -> RawSolution:
-        """FATROP's answer, or where it is refused, the reference IPOPT's from the same guess."""
+        """FATROP's answer, or where it is refused, the reference IPOPT's from the same guess
+        (unless built with fallback_max_iter=0)."""
         raw = self.solve_without_fallback(parameters, guess)
-        return raw if raw.success else self._fall_back(parameters, guess, raw.status)
+        return raw if raw.success or not self._falls_back else self._fall_back(parameters, guess, raw.status)
 
     def solve_without_fallback(self, parameters: np.ndarray, guess: np.ndarray) -> RawSolution:
         """FATROP's answer alone: a refused one comes back failed (decision: the guess), its status

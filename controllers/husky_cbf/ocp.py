@@ -26,7 +26,7 @@ and for movers a margin growing with their predicted travel).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import lru_cache
 
 import casadi as ca
@@ -40,12 +40,14 @@ from controllers.husky_cbf.model import CONTROL_DIM, STATE_DIM, extended_step
 from controllers.model import wrap_angle_sym
 
 INF = float("inf")
-#: IPOPT iterations for a hard problem that FATROP failed on; past them the problem counts as
-#: infeasible and the controller's exact-penalty re-solve follows (which returns a hard-feasible
-#: plan, zero slack, where it finds one). The cap bounds the step's solve time: proving a hard
-#: problem infeasible (IPOPT's restoration phase) takes far more iterations than solving a
-#: feasible one, and the exact-penalty re-solve answers that question for less.
-HARD_FALLBACK_MAX_ITER = 40
+#: FATROP iterations for the hard problem, with no IPOPT fallback: past them the problem counts
+#: as infeasible and the controller's exact-penalty re-solve follows, which has the hard problem's
+#: solution wherever the hard problem is feasible (the penalty is exact) and a plan with the least
+#: obstacle slack where it is not. A feasible hard problem converges in far fewer iterations than
+#: a line search takes to fail on an infeasible one, and proving infeasibility (IPOPT's
+#: restoration phase) costs more still, so the budget bounds a step's solve time without
+#: changing its answer.
+HARD_MAX_ITER = 40
 
 
 @dataclass(frozen=True)
@@ -249,7 +251,10 @@ def solver_for(
     config: HuskyCBFConfig, horizon: int, slots: int, soft: bool
 ) -> tuple[Problem, FatropSolver | IpoptSolver]:
     """The problem and the solver `config.nmpc.solver.backend` names for it; on FATROP, the hard
-    problem's IPOPT fallback is capped at HARD_FALLBACK_MAX_ITER."""
+    problem gets HARD_MAX_ITER iterations and no IPOPT fallback."""
     problem = build_problem(config, horizon, slots, soft)
-    cap = None if soft else HARD_FALLBACK_MAX_ITER
-    return problem, make_solver(problem.nlp, config.nmpc.solver, fallback_max_iter=cap)
+    options = config.nmpc.solver
+    if soft or options.backend != "fatrop":
+        return problem, make_solver(problem.nlp, options)
+    hard = replace(options, max_iter=min(options.max_iter, HARD_MAX_ITER))
+    return problem, make_solver(problem.nlp, hard, fallback_max_iter=0)

@@ -385,15 +385,16 @@ def test_the_slacks_bounds_are_declared_redundant_only_where_they_are() -> None:
 
 
 def test_fatrop_fallback_can_be_capped() -> None:
-    """A capped IPOPT fallback (husky-cbf's hard problem: its penalised re-solve follows) stops at
-    its cap; uncapped, the same fallback converges."""
+    """A capped IPOPT fallback stops at its cap; uncapped, the same fallback converges; a cap of 0
+    (husky-cbf's hard problem: its penalised re-solve follows) leaves FATROP's failure as it is."""
     config, p, guess = _one_problem()
 
     answers = {}
-    for cap in (None, 2):
+    for cap in (None, 2, 0):
         solver = FatropSolver(paper_nlp(config), SolverOptions(), fallback_max_iter=cap)
         solver._function = StandIn(error=RuntimeError("Evaluation failed"))
         answers[cap] = solver.solve(p, guess)
     assert answers[None].success and answers[None].iterations > 2
     assert not answers[2].success and answers[2].iterations == 2
     assert answers[2].fallback_reason == "fatrop: solver error"
+    assert not answers[0].success and answers[0].solver == "fatrop" and answers[0].status == "solver error"
