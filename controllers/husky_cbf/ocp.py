@@ -45,8 +45,9 @@ INF = float("inf")
 #: solution wherever the hard problem is feasible (the penalty is exact) and a plan with the least
 #: obstacle slack where it is not. A feasible hard problem converges in far fewer iterations than
 #: a line search takes to fail on an infeasible one, and proving infeasibility (IPOPT's
-#: restoration phase) costs more still, so the budget bounds a step's solve time without
-#: changing its answer.
+#: restoration phase) costs more still, so the budget bounds a step's solve time; the answer is
+#: the hard one wherever the penalty weight (`soft_penalty`) exceeds the obstacle rows'
+#: multipliers and the re-solve finds the same local optimum. A lower configured max_iter stays.
 HARD_MAX_ITER = 40
 
 

@@ -82,9 +82,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         with warnings.catch_warnings():  # a library's UserWarning (no run.mcap) as one line
             warnings.showwarning = _show_warning
             # a library's deprecation is for its developers (Python hides them by default outside
-            # __main__), whatever filters the caller runs the command under
-            warnings.filterwarnings("ignore", category=DeprecationWarning)
-            warnings.filterwarnings("ignore", category=PendingDeprecationWarning)
+            # __main__), whatever filters the caller runs the command under, unless -W asks
+            if not sys.warnoptions:
+                warnings.filterwarnings("ignore", category=DeprecationWarning)
+                warnings.filterwarnings("ignore", category=PendingDeprecationWarning)
             return _run_command(argv)
     finally:
         interrupts.restore(previous)

@@ -36,6 +36,7 @@ from __future__ import annotations
 import os
 import sys
 import tempfile
+import threading
 from typing import Any
 
 from husky_sim.extras import missing
@@ -97,7 +98,6 @@ PARTICIPANT_USER_DATA = b"enclave=/;"
 TYPE_HASH_USER_DATA = b"typehash="
 #: The graph's layouts: Humble's 24-byte gids and the 16-byte ones of every later distribution.
 HUMBLE_GRAPH, LATER_GRAPH = "humble", "kilted"
-LAYOUT_NAMES = {HUMBLE_GRAPH: "Humble's (24-byte gids)", LATER_GRAPH: "Iron's and later (16-byte gids)"}
 
 
 def graph_layout(user_data: bytes | None) -> str:
@@ -117,16 +117,17 @@ def dds_topic_name(ros_topic: str) -> str:
 
 def open_domain(domain_id: int, localhost_only: bool) -> Domain:
     """Configure a DDS domain for this process (husky_sim.ros2.dds_config: the user's
-    CYCLONEDDS_URI, then ours). Cyclone DDS's own diagnostics (written to stderr) become a
-    one-line DdsConfigError when it refuses the configuration; a notice names what was set aside."""
+    CYCLONEDDS_URI, then ours). Cyclone DDS's own diagnostics, which it writes to the process's
+    stderr (file descriptor 2, redirected while the domain is created and always restored), become
+    a one-line DdsConfigError when it refuses the configuration; a notice names what was set aside."""
     merged = merged_config(localhost_only)
     sys.stderr.flush()
-    saved = os.dup(2)
+    error: DDSException | None = None
     with tempfile.TemporaryFile() as log:
-        os.dup2(log.fileno(), 2)
+        saved = os.dup(2)
         try:
+            os.dup2(log.fileno(), 2)
             domain = Domain(domain_id, merged.xml)
-            error = None
         except DDSException as exc:
             error = exc
         finally:
@@ -147,8 +148,10 @@ def open_domain(domain_id: int, localhost_only: bool) -> Domain:
 
 
 #: Domains this process configured, by id (one configuration per id and process, kept for the
-#: process's life: the first transport on a domain decides whether it is localhost-only).
+#: process's life: the first transport on a domain decides whether it is localhost-only), and the
+#: lock that makes configuring one (and redirecting stderr for it) one thread's at a time.
 _CONFIGURED_DOMAINS: dict[int, Domain] = {}
+_CONFIGURING = threading.Lock()
 
 
 class _Subscription:
@@ -188,8 +191,9 @@ class CycloneTransport(TopicsBySetting):
         self.settings = settings
         self.messages = msg.cyclone_kit(settings.ros_distro or msg.DEFAULT_DISTRO)
         domain_id = settings.resolved_domain_id()
-        if domain_id not in _CONFIGURED_DOMAINS:
-            _CONFIGURED_DOMAINS[domain_id] = open_domain(domain_id, settings.localhost_only)
+        with _CONFIGURING:
+            if domain_id not in _CONFIGURED_DOMAINS:
+                _CONFIGURED_DOMAINS[domain_id] = open_domain(domain_id, settings.localhost_only)
         self.participant = DomainParticipant(domain_id, qos=Qos(Policy.Userdata(PARTICIPANT_USER_DATA)))
         self._topics: dict[str, Topic] = {}
         self._readers: list[DataReader] = []
@@ -262,12 +266,11 @@ class CycloneTransport(TopicsBySetting):
                 if layout != self._graph_layout:
                     self._open_graph(layout)
                     self._announce()
-                print(f"ROS graph: announced in the peers' layout, {LAYOUT_NAMES[layout]}", flush=True)
             elif layout != self.graph_distro and not self._mixed_reported:
                 self._mixed_reported = True
                 print(
-                    f"ROS graph: peers of both layouts on one domain ({HUMBLE_GRAPH} and later); this node "
-                    f"stays announced in the first peer's ({self.graph_distro}); --ros-distro chooses",
+                    "ROS graph: peers of both layouts on one domain (Humble's 24-byte gids and later "
+                    "ones' 16); this node stays announced in the first peer's; --ros-distro chooses",
                     file=sys.stderr,
                     flush=True,
                 )

@@ -11,10 +11,14 @@ applies them in order: a later value of a setting overrides an earlier one, whil
   participant must never reach a robot on the network, and Cyclone DDS refuses a configuration that
   selects one interface twice.
 
-Everything else of the user's (tracing, participant indices, buffer sizes, shared memory, ...)
-applies unchanged. A fragment Cyclone DDS accepts but a strict XML parser does not (Cyclone DDS's
-`</>` shorthand) passes through as it is. A file that cannot be read, or a merged configuration
-that Cyclone DDS refuses, is a DdsConfigError: one line, with Cyclone DDS's own reason.
+Everything else of the user's (tracing, buffer sizes, shared memory, ...) applies, but for the
+settings our fragments set after theirs (localhost-only: the participant index and its range, the
+heartbeat interval). Files and `${VAR}`s in the URI are read here, as Cyclone DDS reads them; a
+file that needs nothing set aside is handed on by name. A fragment Cyclone DDS accepts but a strict
+XML parser does not (its `</>` shorthand) passes through as it is on the network, and is refused
+for a localhost-only participant, whose network placement must be read to be set aside. A file
+that cannot be read, such a fragment, or a merged configuration that Cyclone DDS refuses, is a
+DdsConfigError: one line, with Cyclone DDS's own reason where it gave one.
 """
 
 from __future__ import annotations
@@ -31,8 +35,17 @@ URI_VARIABLE = "CYCLONEDDS_URI"
 #: Vendor ids whose endpoints are matched by type name: eProsima's (Fast DDS).
 IGNORE_TYPE_INFORMATION_VENDORS = ("1.15",)
 
-#: Elements that place a participant on the network; a localhost-only participant sets them itself.
-NETWORK_PLACEMENT = ("Interfaces", "NetworkInterfaceAddress", "AllowMulticast", "Peers")
+#: Elements that place a participant on the network (the last three deprecated, which Cyclone DDS
+#: refuses beside `Interfaces`); a localhost-only participant sets its placement itself.
+NETWORK_PLACEMENT = (
+    "Interfaces",
+    "NetworkInterfaceAddress",
+    "AllowMulticast",
+    "Peers",
+    "AssumeMulticastCapable",
+    "MulticastRecvNetworkInterfaceAddresses",
+    "PreferMulticast",
+)
 
 #: Loopback only: no multicast, discovery by unicast to 127.0.0.1. Reliable writers heartbeat
 #: every 5 ms instead of 100 ms, so a write is acknowledged within about a millisecond (a rehearsal
@@ -110,15 +123,29 @@ def split_uri(uri: str) -> list[str]:
     return items
 
 
-def _read(item: str) -> str:
-    """An item's XML: the item itself, or the file it names (file:// URI or path)."""
+def _path(item: str) -> str | None:
+    """The file an item names (file:// URI or path, `${VAR}`s expanded), or None for XML."""
     if item.startswith("<"):
-        return item
-    path = item[len("file://") :] if item.startswith("file://") else item
+        return None
+    return os.path.expandvars(item[len("file://") :] if item.startswith("file://") else item)
+
+
+def _read(item: str) -> bytes:
+    """An item's XML: the item itself, or the file it names, as bytes (a file's declared encoding
+    is the XML parser's to read)."""
+    path = _path(item)
+    if path is None:
+        return item.encode()
     try:
-        return Path(path).read_text()
+        return Path(path).read_bytes()
     except OSError as exc:
         raise DdsConfigError(f"{URI_VARIABLE}: cannot read {item[:200]}: {exc.strerror or exc}") from None
+
+
+def _ascii_xml(root: ET.Element) -> str:
+    """An element as XML in ASCII (other characters as references): Cyclone DDS's Python binding
+    hands a configuration on as ASCII."""
+    return ET.tostring(root, encoding="us-ascii", xml_declaration=False).decode("ascii")
 
 
 def _local(tag: str) -> str:
@@ -156,24 +183,32 @@ def merged_config(localhost_only: bool, environ: dict[str, str] | None = None) -
     fragments: list[str] = []
     set_aside: list[str] = []
     vendors: list[str] = []
-    for item in split_uri(uri):
-        text = _read(item).strip()
+    for number, item in enumerate(split_uri(uri), start=1):
+        raw = _read(item).strip()
         try:
-            root = ET.fromstring(text)
-        except ET.ParseError:  # not strict XML (Cyclone DDS's shorthand): Cyclone DDS judges it
-            fragments.append(text)
+            root = ET.fromstring(raw)
+        except ET.ParseError as exc:
+            if localhost_only:
+                raise DdsConfigError(
+                    f"{URI_VARIABLE}: item {number} is not strict XML ({exc}); a localhost-only "
+                    "participant reads the network placement to set it aside: close every element "
+                    "by name"
+                ) from None
+            fragments.append(raw.decode(errors="replace") if _path(item) is None else f"file://{_path(item)}")
             continue
         for element in root.iter():
             if _local(element.tag) == "ignoretypeinformation" and element.text:
                 vendors += [v.strip() for v in element.text.split(",") if v.strip()]
-        if localhost_only:
-            removed = _set_aside(root, NETWORK_PLACEMENT)
-            if removed:
-                set_aside += removed
-                _without_namespaces(root)
-                text = ET.tostring(root, encoding="unicode") if len(root) or root.text else ""
-        if text:
-            fragments.append(text)
+        removed = _set_aside(root, NETWORK_PLACEMENT) if localhost_only else []
+        if removed:
+            set_aside += removed
+            _without_namespaces(root)
+            if len(root) or root.text:
+                fragments.append(_ascii_xml(root))
+        elif _path(item) is not None:
+            fragments.append(f"file://{_path(item)}")  # Cyclone DDS reads it as the user wrote it
+        else:
+            fragments.append(item if item.isascii() else _ascii_xml(root))
     ours = [compatibility_config(tuple(vendors)), *([LOCALHOST_ONLY_CONFIG] if localhost_only else [])]
     return MergedConfig(",".join([*fragments, *ours]), tuple(dict.fromkeys(set_aside)))
 
@@ -182,6 +217,9 @@ _LOG_PREFIX = re.compile(r"^\d+\.\d+\s+\[\d*\]\s+[^:]*:\s*")
 
 
 def refusal(log: str) -> str:
-    """Cyclone DDS's reason for refusing a configuration, from what it wrote to stderr."""
+    """Cyclone DDS's reason for refusing a configuration, from what it wrote to stderr: its
+    configuration and error lines where there are any (a user's tracing may share stderr), else
+    its last lines."""
     lines = [_LOG_PREFIX.sub("", line).strip() for line in log.splitlines() if line.strip()]
-    return "; ".join(lines[-3:]) if lines else "no reason given"
+    reasons = [line for line in lines if line.startswith("config:") or "error" in line.lower()]
+    return "; ".join((reasons or lines)[-3:]) if lines else "no reason given (see its log)"

@@ -12,7 +12,7 @@ answers) on /cmd_vel once per tau and the plan as nav_msgs/Path.
 A control step runs on the first odometry sample at least tau (of odometry stamps) after the
 previous step's. Safety, each event counted and logged as a row of `serve.csv`:
 - `stale`: no odometry newer than 2 tau on the node's clock -> zero command, once per tau;
-- `blind`: an obstacle publisher is matched but none of its MarkerArrays has arrived yet -> zero
+- `blind`: an obstacle publisher is matched and no MarkerArray has arrived yet -> zero
   command instead of a plan that ignores obstacles the robot reports (a reliable writer's first
   samples can reach a newly joined reader a heartbeat period late);
 - `brake`: the controller fell back to braking (or raised: also counted as `error`) -> zero
@@ -39,8 +39,14 @@ import numpy as np
 from controllers import Controller, ControlResult, Obstacle, Reference, SetPoint
 from husky_sim import interrupts
 from husky_sim.ros2 import messages as msg
-from husky_sim.ros2.settings import Ros2Settings
+from husky_sim.ros2.settings import ROS_DISTRO_NAMES, Ros2Settings
 from husky_sim.ros2.transport import latest, open_transport
+
+#: How the node names the graph layout it is announced in (Humble's gids are 24 bytes, later ones' 16).
+LAYOUT_NAMES = {
+    name: "Humble's (24-byte gids)" if name == "humble" else "Iron's and later (16-byte gids)"
+    for name in ROS_DISTRO_NAMES
+}
 
 #: Odometry older than this many control periods (on the node's clock) stops the robot.
 STALE_ODOMETRY_PERIODS = 2.0
@@ -227,10 +233,14 @@ class ControllerNode:
         then send a zero command. Never raises for a solver failure."""
         end = math.inf if duration_s is None else time.monotonic() + duration_s
         try:
+            layout = getattr(self.transport, "graph_distro", None)
             while not stop() and time.monotonic() < end:
                 interrupts.check()
                 self.transport.wait(0.25 * self.tau_s)
                 self.poll()
+                if layout is None and getattr(self.transport, "graph_distro", None) is not None:
+                    layout = self.transport.graph_distro
+                    print(f"ROS graph: announced in the peers' layout, {LAYOUT_NAMES[layout]}", flush=True)
         finally:
             with interrupts.deferred():
                 self._publish_twist(np.zeros(2), self.now())

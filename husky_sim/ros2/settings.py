@@ -93,7 +93,8 @@ class Ros2Settings:
     use_sim_time: bool = False  # the node's clock is /clock (a simulator) instead of the wall clock
     cmd_vel_stamped: bool = False  # geometry_msgs/TwistStamped on cmd_vel (Jazzy's diff-drive)
     node_name: str = "husky_sim_controller"  # the node's name in the ROS graph
-    # the graph's layout and message definitions (Cyclone DDS transport); None: follow the peers
+    # the distribution whose graph layout and message definitions the Cyclone DDS transport speaks;
+    # None: the graph layout of the peers, Humble's message definitions (the same on the wire)
     ros_distro: str | None = None
     domain_id: int | None = None
     localhost_only: bool = False  # keep DDS traffic on 127.0.0.1 (rehearsals)

@@ -6,7 +6,7 @@ node, when the node joins a robot that is already publishing (the usual order on
 Each run: an rclpy process publishes obstacles (visualization_msgs/MarkerArray, reliable, 10 Hz)
 and odometry (nav_msgs/Odometry, best effort, 50 Hz) on a leased domain, loopback only; 3 s later a
 Cyclone DDS transport (ours) subscribes to both and records each sample's latency (reception
-minus source timestamp). Prints the median and p99 of the first 20 samples of each topic, pooled
+minus source timestamp). Prints the median, p99 and max of the first 20 samples of each topic, pooled
 over the runs. `--fastdds-profile` hands the robot a Fast DDS XML profile (for instance one with
 a shorter writer heartbeat period) through FASTDDS_DEFAULT_PROFILES_FILE.
 """

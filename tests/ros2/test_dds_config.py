@@ -19,6 +19,7 @@ from husky_sim.ros2.dds_config import (
     URI_VARIABLE,
     DdsConfigError,
     merged_config,
+    refusal,
     split_uri,
 )
 from husky_sim.ros2.settings import lease_domain_id
@@ -100,6 +101,51 @@ def test_the_users_type_information_vendors_are_kept_beside_ours() -> None:
     )
 
 
+def test_what_a_localhost_only_participant_cannot_read_is_refused_and_the_rest_handed_on(
+    tmp_path: Path,
+) -> None:
+    """Cyclone DDS's `</>` shorthand passes through on the network but is refused (one line) where
+    the placement must be set aside; a fragment that is nothing but placement disappears; a file
+    with nothing to set aside is handed on by name (`${VAR}`s expanded); one rewritten with
+    non-ASCII text comes out as ASCII, as Cyclone DDS's binding needs."""
+    shorthand = '<General><Interfaces><NetworkInterface name="eth0"/></></>'
+    assert merged_config(False, {URI_VARIABLE: shorthand}).xml.startswith(shorthand)
+    with pytest.raises(DdsConfigError, match=r"^CYCLONEDDS_URI: item 1 is not strict XML \("):
+        merged_config(True, {URI_VARIABLE: shorthand})
+    only = merged_config(True, {URI_VARIABLE: '<Peers><Peer address="10.0.0.2"/></Peers>'})
+    assert only.set_aside == ("Peers",) and "10.0.0.2" not in only.xml
+    plain = tmp_path / "plain.xml"
+    plain.write_text(
+        "<CycloneDDS><Domain><Tracing><Verbosity>warning</Verbosity></Tracing></Domain></CycloneDDS>"
+    )
+    os.environ["HUSKY_SIM_TEST_DIR"] = str(tmp_path)
+    try:
+        handed_on = merged_config(True, {URI_VARIABLE: "file://${HUSKY_SIM_TEST_DIR}/plain.xml"})
+    finally:
+        del os.environ["HUSKY_SIM_TEST_DIR"]
+    assert handed_on.xml.startswith(f"file://{plain}") and handed_on.set_aside == ()
+    accented = tmp_path / "réseau.xml"
+    accented.write_text(
+        '<?xml version="1.0" encoding="UTF-8"?><CycloneDDS><Domain><!-- Straße -->'
+        "<General><AllowMulticast>false</AllowMulticast><MaxMessageSize>1400B</MaxMessageSize>"
+        "</General><Tracing><OutputFile>/tmp/café.log</OutputFile></Tracing></Domain></CycloneDDS>",
+        encoding="utf-8",
+    )
+    rewritten = merged_config(True, {URI_VARIABLE: f"file://{accented}"})
+    user_part = rewritten.xml[: rewritten.xml.index(LOCALHOST_ONLY_CONFIG)]
+    assert rewritten.xml.isascii() and "caf&#233;.log" in user_part and "AllowMulticast" not in user_part
+
+
+def test_cyclone_ddss_reason_is_its_configuration_line_not_a_users_trace() -> None:
+    said = (
+        "1796587285.1 [66]     python: trace line one\n"
+        "1796587285.2 [66]     python: config: //CycloneDDS/Domain/General: Bogus: unknown element\n"
+        "1796587285.3 [66]     python: trace line two\n"
+    )
+    assert refusal(said) == "config: //CycloneDDS/Domain/General: Bogus: unknown element"
+    assert refusal("") == "no reason given (see its log)"
+
+
 def test_an_unreadable_file_is_a_one_line_error() -> None:
     with pytest.raises(
         DdsConfigError, match=r"^CYCLONEDDS_URI: cannot read file:///nonexistent/c.xml: No such file"
@@ -109,13 +155,17 @@ def test_an_unreadable_file_is_a_one_line_error() -> None:
 
 # -- real Cyclone DDS ------------------------------------------------------------------------------
 @pytest.mark.parametrize("localhost_only", [True, False])
-def test_cyclone_dds_refuses_an_invalid_configuration_in_one_line(monkeypatch, localhost_only: bool) -> None:
+def test_cyclone_dds_refuses_an_invalid_configuration_in_one_line(
+    monkeypatch, capfd, localhost_only: bool
+) -> None:
     from husky_sim.ros2.cyclone_transport import open_domain
 
     monkeypatch.setenv(URI_VARIABLE, INVALID)
     with pytest.raises(DdsConfigError) as error:
         open_domain(lease_domain_id(200, 232), localhost_only)
     message = str(error.value)
+    os.write(2, b"stderr is ours again\n")
+    assert "stderr is ours again" in capfd.readouterr().err  # the redirect ended with the refusal
     assert "\n" not in message and message.startswith("CYCLONEDDS_URI: Cyclone DDS refused the configuration")
     assert "MaxMessageSize/#text: perhaps: invalid value" in message and message.endswith(
         "fix it or unset CYCLONEDDS_URI"

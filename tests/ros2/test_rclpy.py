@@ -145,7 +145,8 @@ def test_every_message_both_ways_with_every_qos_profile() -> None:
 def test_the_graph_follows_the_peers_layout(capsys) -> None:
     """No distribution given: our node announces itself in the graph layout of the first ROS 2
     peer it discovers. A Humble-layout peer (endpoints without `typehash=`) keeps Humble's 24-byte
-    gids; rclpy (the Kilted wheels, Fast DDS) then gets a one-line notice of mixed layouts. With
+    gids; an rclpy peer (the Kilted wheels, Fast DDS) joining later is named in a one-line notice
+    of mixed layouts, not followed. With
     rclpy first, the node switches to 16-byte gids and rclpy's graph lists it with its topic."""
     domain = _domain()
     humble = CycloneTransport(
@@ -236,7 +237,10 @@ def test_an_rclpy_robot_is_driven_to_the_goal_and_sees_the_nodes_safety(
         seen = _robot(tmp_path, domain, 24.0, *silence, *(["--stamped"] if stamped else []))
     finally:
         node.wait(timeout=60)
-    assert node.returncode == 0, (tmp_path / "serve.out").read_text()
+    output = (tmp_path / "serve.out").read_text()
+    assert node.returncode == 0, output
+    if transport == "cyclonedds" and not stamped:  # no --ros-distro: the robot's layout, found
+        assert "ROS graph: announced in the peers' layout, Iron's and later (16-byte gids)" in output
     commands, plans = seen["commands"], seen["plans"]
     t = np.array([c["t"] for c in commands]) - seen["t0"]
     driving = (t > 1.0) & (t < 12.0)
