@@ -246,7 +246,6 @@ class CycloneTransport(TopicsBySetting):
         self._graph = DataWriter(
             self.participant, Topic(self.participant, GRAPH_TOPIC, graph_type), qos=GRAPH_QOS
         )
-        self._graph_layout = layout
 
     def _follow_peers(self) -> None:
         """Take the discovery data of peers' ros_discovery_info writers: the first decides the
@@ -261,9 +260,9 @@ class CycloneTransport(TopicsBySetting):
                 continue
             user_data = sample.qos[Policy.Userdata] if sample.qos else None
             layout = graph_layout(user_data.data if user_data else None)
-            if self.graph_distro is None:
+            if self.graph_distro is None:  # announced in Humble's layout until now
                 self.graph_distro = layout
-                if layout != self._graph_layout:
+                if layout != HUMBLE_GRAPH:
                     self._open_graph(layout)
                     self._announce()
             elif layout != self.graph_distro and not self._mixed_reported:
