@@ -31,7 +31,7 @@ import numpy as np
 from controllers.husky_cbf.behaviours.approach import PointApproach, SetPointApproach
 from controllers.husky_cbf.behaviours.base import ReferenceKind, Situation, Target, nearer_way
 from controllers.husky_cbf.behaviours.recovery import Recovery
-from controllers.husky_cbf.behaviours.yield_to_movers import BraceAcross, StepAside, WaitBeside
+from controllers.husky_cbf.behaviours.yield_to_movers import BraceAcross, RobotLimits, StepAside, WaitBeside
 from controllers.husky_cbf.config import HuskyCBFConfig
 from controllers.husky_cbf.movers import MoverModel
 from controllers.husky_cbf.planner import Planner
@@ -95,7 +95,7 @@ class Arbiter:
         planner = Planner(config.planner, movers)
         return cls(
             planner,
-            StepAside(config.yielding, movers),
+            StepAside(config.yielding, movers, RobotLimits.of(config)),
             WaitBeside(config.yielding, movers, config.approach.speed_mps),
             BraceAcross(config.yielding, movers),
             SetPointApproach(config.approach, config.planner.grid_resolution_m),

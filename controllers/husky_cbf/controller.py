@@ -53,8 +53,10 @@ SLACK_TOL = 1e-6
 YAW_RATE_CORRECTION = 0.5
 #: Tracking: the goal is the reference this far (s) ahead, so that it leads the robot on ...
 TRACKING_PREVIEW_S = 1.0
-#: ... or the first later point outside every inflated obstacle, searched this far (s) past it.
-TRACKING_SEARCH_S = 5.0
+#: ... or the first later point outside every inflated obstacle, searched this far (s) past it:
+#: at the slowest trajectory (behaviours.base.SLOW_REFERENCE_MPS) that passes 3 m, wider than an
+#: inflated obstacle, so the goal lies beyond what stands on the reference, never inside it.
+TRACKING_SEARCH_S = 30.0
 #: Turn monitor (turn_monitor.py): over this window (s), once the model predicted at least
 #: WEAK_TURN_MIN_RAD of heading change, ...
 WEAK_TURN_WINDOW_S = 1.6
@@ -176,12 +178,13 @@ class HuskyCBFController:
     def _tracking_goal(self, reference: Reference, circles: np.ndarray, t: float) -> np.ndarray:
         """The reference TRACKING_PREVIEW_S ahead, or the first later one outside every inflated
         obstacle (`circles`, MoverModel.body_circles)."""
-        times = t + TRACKING_PREVIEW_S + np.arange(0.0, TRACKING_SEARCH_S, self.tau_s)
-        states = reference.sample(float(times[0]), self.tau_s, len(times) - 1)[0]
-        for state in states:
-            if circles.size == 0 or np.all(np.hypot(*(circles[:, :2] - state[:2]).T) > circles[:, 2]):
-                return state
-        return states[0]
+        steps = round(TRACKING_SEARCH_S / self.tau_s)
+        states = reference.sample(t + TRACKING_PREVIEW_S, self.tau_s, steps)[0]
+        if circles.size == 0:
+            return states[0]
+        gaps = np.hypot(states[:, None, 0] - circles[:, 0], states[:, None, 1] - circles[:, 1])
+        clear = np.all(gaps > circles[:, 2], axis=1)
+        return states[int(np.argmax(clear))] if clear.any() else states[0]
 
     # -- 4. the NMPC's reference and limits -------------------------------------------------
     def _feed_forward(self, sampled: tuple[np.ndarray, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -19,7 +20,7 @@ from controllers.husky_cbf.behaviours.approach import (
     point_approach,
 )
 from controllers.husky_cbf.behaviours.base import ReferenceKind, Situation, Target
-from controllers.husky_cbf.behaviours.yield_to_movers import SideStep, StepAside
+from controllers.husky_cbf.behaviours.yield_to_movers import RobotLimits, SideStep, StepAside
 from controllers.husky_cbf.config import (
     ApproachConfig,
     MoverConfig,
@@ -28,9 +29,12 @@ from controllers.husky_cbf.config import (
 )
 from controllers.husky_cbf.movers import PLANNER_SWEEP_FACTOR, MoverModel
 from controllers.husky_cbf.planner import Planner, segment_blocked
+from controllers.references import CircleTrajectory
 from husky_sim.runs.scenario import load_scenario, shipped_scenarios
 
 INFLATION = 0.48
+#: a Husky's drive: 1 m/s, 3 m/s^2, 1.7 rad/s body yaw rate, 6 rad/s^2, 0.45 s delay and lag
+ROBOT = RobotLimits(1.0, 3.0, 1.7, 6.0, 0.45)
 SWEEP_S = MoverConfig().sweep_s
 TAU = 0.1
 NONE = np.zeros((0, 3))
@@ -255,8 +259,8 @@ def test_stepping_aside_on_a_trajectory_does_not_switch_with_the_robot_s_own_spe
     """A robot standing behind its reference (0.23 m/s north) with a mover crossing from the
     north-west: judged at its own speed, the mover is off course while the robot stands and on
     course once it drives off, so the verdict would switch as it stops and starts. Judged at the
-    reference's velocity, the step aside is the same at either speed; a set-point is judged at the
-    robot's own speed, a slow trajectory standing."""
+    reference, at the reference's velocity, the step aside is the same at either speed; a
+    set-point is judged at the robot's own speed, a slow trajectory standing."""
     pose = np.array([2.35, -0.84, 1.58])
     mover = [Obstacle(0.52, 1.44, 0.3, vx_mps=0.4 * math.cos(-1.0), vy_mps=0.4 * math.sin(-1.0))]
     reference_state = np.array([2.30, 0.08, math.pi / 2 + 0.035])
@@ -269,13 +273,50 @@ def test_stepping_aside_on_a_trajectory_does_not_switch_with_the_robot_s_own_spe
 
     steps = []
     for speed in (0.0, 0.3):
-        step = StepAside(YieldConfig(), _movers()).propose(situation(ReferenceKind.TRAJECTORY, speed))
+        step = StepAside(YieldConfig(), _movers(), ROBOT).propose(situation(ReferenceKind.TRAJECTORY, speed))
         assert step is not None
         steps.append((step.x_m, step.y_m))
     assert steps[0] == steps[1]
     meant = StepAside.meant_velocity
     assert np.allclose(meant(situation(ReferenceKind.SET_POINT, 0.3)), 0.3 * heading)
     assert np.allclose(meant(situation(ReferenceKind.SLOW_TRAJECTORY, 0.3)), 0.0)
+
+
+def test_on_a_trajectory_the_robot_steps_aside_only_when_it_must_leave_and_behind_the_mover() -> None:
+    """A reference heading east at 0.4 m/s with a walker crossing it from the south at 1 m/s, due
+    to meet it: the robot keeps to the reference while the walker is farther off than the robot
+    needs to leave (RobotLimits.leave_s), and then steps aside from the reference point, to the
+    side away from the walker's track ahead (west of it: behind it), not the side the walker is
+    heading for."""
+    reference = np.array([0.0, 0.0, 0.0])
+    velocity = np.array([0.4, 0.0])
+
+    def propose(t_meet_s: float, behaviour: StepAside) -> Target | None:
+        # the walker reaches the reference's point at t_meet_s, where the reference is then
+        meet = velocity * t_meet_s
+        walker = [Obstacle(float(meet[0]), float(meet[1] - t_meet_s), 0.3, vx_mps=0.0, vy_mps=1.0)]
+        s = _situation(reference, reference, walker, ReferenceKind.TRAJECTORY, reference_speed_mps=0.4)
+        return behaviour.propose(replace(s, pose=np.array([0.0, -0.2, 0.0])))
+
+    needed = 0.3 + INFLATION + YieldConfig().margin_m
+    assert 1.5 < ROBOT.leave_s(needed) < 5.9 < YieldConfig().horizon_s
+    assert propose(5.9, StepAside(YieldConfig(), _movers(), ROBOT)) is None  # on course, time to spare
+    behaviour = StepAside(YieldConfig(), _movers(), ROBOT)
+    step = propose(1.5, behaviour)
+    assert step is not None and behaviour.active
+    assert step.path[0] == pytest.approx(reference[:2])  # from the reference point, not the robot
+    assert step.x_m < 0.0  # behind the walker (its track runs north at x = 0.6)
+    relative = np.array([-0.4, 1.0]) / math.hypot(0.4, 1.0)  # its track seen from the point
+    clearance = abs(relative[0] * step.y_m - relative[1] * step.x_m)  # from that track, through the point
+    assert clearance == pytest.approx(needed, abs=1e-6)
+
+
+def test_the_time_to_leave_a_mover_s_track_grows_with_the_distance_and_the_delay() -> None:
+    """RobotLimits.leave_s: a quarter turn and a drive from rest after the delay, in sequence."""
+    slow = RobotLimits(0.5, 1.0, 1.0, 2.0, 0.0)
+    assert slow.leave_s(1.0) == pytest.approx(math.pi / 2 + 0.5 + 2.0 + 0.5)
+    assert replace(slow, delay_s=0.3).leave_s(1.0) == pytest.approx(slow.leave_s(1.0) + 0.3)
+    assert slow.leave_s(2.0) - slow.leave_s(1.0) == pytest.approx(2.0)
 
 
 def test_a_step_aside_goes_to_the_side_of_the_mover_s_line_a_given_point_is_on() -> None:
@@ -590,3 +631,20 @@ def test_the_arbiter_built_for_husky_cbf_shares_one_mover_model() -> None:
     assert all(judge.movers is movers for judge in judges)
     assert arbiter.recovery.planner is arbiter.planner
     assert movers.lead_s == pytest.approx(0.34 + 0.5 * config.movers.sweep_s)
+
+
+def test_the_tracking_goal_lies_beyond_an_obstacle_on_the_reference_never_inside_it() -> None:
+    """A slow circle (0.15 m/s) with a 0.5 m cylinder on it just ahead of the reference: the tracking
+    goal is the first reference point clear of every inflated obstacle, past the cylinder along
+    the reference (its inflated circle spans more of the circle than a few seconds cover), so the
+    planner has a free goal to route round it to."""
+    path = next(p for p in shipped_scenarios() if p.stem == "paper_dynamic_tracking")
+    controller = load_scenario(path).make_controller("husky-cbf")
+    reference = CircleTrajectory(radius_m=3.0, angular_rate_radps=0.05)
+    ahead = reference.state_at(2.0)
+    cylinder = [Obstacle(float(ahead[0]), float(ahead[1]), 0.5)]
+    pose = reference.state_at(-10.0)  # 1.5 m behind the reference, well clear of the cylinder
+    circles = controller.movers.body_circles(cylinder, pose[:2])
+    goal = controller._tracking_goal(reference, circles, 0.0)
+    assert math.hypot(goal[0] - ahead[0], goal[1] - ahead[1]) > circles[0, 2]
+    assert math.atan2(goal[1], goal[0]) > math.atan2(ahead[1], ahead[0])  # past it along the circle

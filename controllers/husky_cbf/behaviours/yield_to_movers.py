@@ -20,12 +20,13 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from dataclasses import dataclass
 
 import numpy as np
 
 from controllers.husky_cbf.behaviours.approach import POINT_FAR_M
 from controllers.husky_cbf.behaviours.base import ReferenceKind, Situation, Target, nearer_way
-from controllers.husky_cbf.config import YieldConfig
+from controllers.husky_cbf.config import HuskyCBFConfig, YieldConfig
 from controllers.husky_cbf.movers import MoverModel, is_static
 from controllers.husky_cbf.planner import RELEASE_MARGIN_M
 from controllers.obstacles import Obstacle
@@ -38,6 +39,41 @@ DEAD_AHEAD_M = 0.02
 BRACE_LEAD_S = 4.0
 #: Below this squared relative speed ((m/s)^2) a mover keeps its distance: no closest approach
 STILL_RELATIVE_SPEED_SQ = 1e-9
+
+
+@dataclass(frozen=True)
+class Threat:
+    """A mover on a collision course with a point: its closest approach relative to the point
+    `closest_m` [x, y] (m), its velocity relative to the point `relative_mps` (m/s), the distance
+    it must pass at (m), and the mover itself."""
+
+    closest_m: np.ndarray
+    relative_mps: np.ndarray
+    needed_m: float
+    mover: Obstacle
+
+    @property
+    def normal(self) -> np.ndarray:
+        """The unit vector left of the relative track."""
+        v = self.relative_mps
+        return np.array([-v[1], v[0]]) / np.hypot(*v)
+
+    def shift_m(self, side: float) -> float:
+        """How far (m) the point must move to `side` (+1 left, -1 right) of the relative track to
+        clear it by the distance needed."""
+        return max(self.needed_m + side * float(self.closest_m @ self.normal), 0.0)
+
+    def step_m(self, side: float) -> np.ndarray:
+        """The step [x, y] (m) from the point to `side` of the relative track."""
+        return side * self.normal * self.shift_m(side)
+
+    def track_gap_m(self, xy: np.ndarray) -> float:
+        """How far (m) `xy` is from the mover's track ahead of it (the ray from where it is along
+        its velocity)."""
+        ob = self.mover
+        start, velocity = np.array([ob.x_m, ob.y_m]), np.array([ob.vx_mps, ob.vy_mps])
+        along = max(float((xy - start) @ velocity) / float(velocity @ velocity), 0.0)
+        return float(np.hypot(*(xy - start - along * velocity)))
 
 
 class SideStep:
@@ -67,13 +103,45 @@ class SideStep:
         obstacles: Sequence[Obstacle],
         side_of: np.ndarray | None = None,
         horizon_s: float | None = None,
+        behind_mover: bool = False,
     ) -> Target | None:
         """The step aside from the soonest mover on a collision course with `point_xy` [x, y] (m)
         moving at `velocity_mps` [vx, vy] (m/s, world frame), or None; its heading is the step's
         direction or its opposite, whichever is nearer `heading_rad` (the heading at the point).
         The step goes to the side of the mover's line that the point `side_of` [x, y] (m) is on,
-        if given (else away from the line; to the left when dead ahead); movers are judged over
-        `horizon_s` (s; default yielding.horizon_s)."""
+        if given; else, with `behind_mover`, to the side farther from the mover's own track ahead
+        of it (where the NMPC and the planner sweep it); else away from the line (to the left when
+        dead ahead). Movers are judged over `horizon_s` (s; default yielding.horizon_s)."""
+        point_xy = np.asarray(point_xy, dtype=float)
+        threat, soonest = self.threat(point_xy, velocity_mps, obstacles, horizon_s)
+        self.soonest_s = soonest  # the threat's time to its closest approach (s); inf: none
+        if threat is None:
+            self.side = 0.0
+            return None
+        if not self.side:
+            offset = float(threat.closest_m @ threat.normal)  # > 0: the mover passes left of the point
+            if side_of is not None:  # ... left of `side_of`
+                offset -= float((np.asarray(side_of, dtype=float) - point_xy) @ threat.normal)
+            if behind_mover and side_of is None:
+                ahead = [threat.track_gap_m(point_xy + threat.step_m(side)) for side in (-1.0, 1.0)]
+                self.side = -1.0 if ahead[0] > ahead[1] else 1.0
+            else:  # step to the other side (left if dead ahead)
+                self.side = -1.0 if offset > DEAD_AHEAD_M else 1.0
+        step = threat.step_m(self.side)
+        target = point_xy + step
+        heading = nearer_way(math.atan2(step[1], step[0]), heading_rad)  # reversing if that turns less
+        return Target(float(target[0]), float(target[1]), heading, np.array([point_xy, target]))
+
+    def threat(
+        self,
+        point_xy: np.ndarray,
+        velocity_mps: np.ndarray,
+        obstacles: Sequence[Obstacle],
+        horizon_s: float | None = None,
+    ) -> tuple[Threat | None, float]:
+        """The soonest mover on a collision course with `point_xy` moving at `velocity_mps` within
+        `horizon_s` (default yielding.horizon_s), and its time to closest approach (s); (None, inf)
+        when there is none. Pure: the side taken is not touched."""
         cfg = self.config
         horizon_s = cfg.horizon_s if horizon_s is None else horizon_s
         point_xy = np.asarray(point_xy, dtype=float)
@@ -94,31 +162,23 @@ class SideStep:
             swept = self.movers.growth_m(speed) + RELEASE_MARGIN_M
             needed = ob.radius_m + self.movers.inflation_m + max(cfg.margin_m, swept)
             if np.hypot(*closest) < needed and t_c < soonest:
-                threat, soonest = (closest, rel_v, needed), t_c
-        self.soonest_s = soonest  # the threat's time to its closest approach (s); inf: none
-        if threat is None:
-            self.side = 0.0
-            return None
-        closest, rel_v, needed = threat
-        normal = np.array([-rel_v[1], rel_v[0]]) / np.hypot(*rel_v)  # left of the relative track
-        if not self.side:
-            offset = float(closest @ normal)  # > 0: the mover passes left of the point
-            if side_of is not None:  # ... left of `side_of`
-                offset -= float((np.asarray(side_of, dtype=float) - point_xy) @ normal)
-            # step to the other side (left if dead ahead)
-            self.side = -1.0 if offset > DEAD_AHEAD_M else 1.0
-        shift = needed + self.side * float(closest @ normal)  # to `needed` beyond the mover's line
-        step = self.side * normal * max(shift, 0.0)
-        target = point_xy + step
-        heading = nearer_way(math.atan2(step[1], step[0]), heading_rad)  # reversing if that turns less
-        return Target(float(target[0]), float(target[1]), heading, np.array([point_xy, target]))
+                threat, soonest = Threat(closest, rel_v, needed, ob), t_c
+        return threat, soonest
 
 
 class StepAside:
-    """Steps the robot aside from a mover on a collision course with it (a Behaviour)."""
+    """Steps the robot aside from a mover on a collision course with it (a Behaviour).
 
-    def __init__(self, config: YieldConfig, movers: MoverModel) -> None:
+    On a trajectory the robot is judged, and steps aside, from the reference point moving at the
+    reference's velocity: the step is across the mover's track relative to the reference, so the
+    target moves on with the reference and the robot keeps its progress along it. It starts only
+    when the robot must leave to be clear in time (`leave_s`): until then it tracks, since every
+    second off the reference is tracking error. On a set-point it steps aside as soon as a mover
+    is on course (yielding.horizon_s), from where the robot is."""
+
+    def __init__(self, config: YieldConfig, movers: MoverModel, robot: RobotLimits) -> None:
         self.judge = SideStep(config, movers)
+        self.robot = robot
 
     @property
     def active(self) -> bool:
@@ -144,8 +204,52 @@ class StepAside:
         return float(speed) * np.array([math.cos(course), math.sin(course)])
 
     def propose(self, situation: Situation) -> Target | None:
-        pose = situation.pose
-        return self.judge.step(pose[:2], pose[2], self.meant_velocity(situation), situation.obstacles)
+        s, velocity = situation, self.meant_velocity(situation)
+        if s.kind is not ReferenceKind.TRAJECTORY:
+            return self.judge.step(s.pose[:2], s.pose[2], velocity, s.obstacles)
+        point = s.reference_state[:2]
+        if not self.active:
+            threat, soonest = self.judge.threat(point, velocity, s.obstacles)
+            if threat is None:
+                return None
+            shift = max(threat.shift_m(side) for side in (-1.0, 1.0))  # either side it takes
+            if soonest > self.robot.leave_s(shift):
+                return None  # it tracks on: there is time to leave later
+        return self.judge.step(point, s.pose[2], velocity, s.obstacles, behind_mover=True)
+
+
+@dataclass(frozen=True)
+class RobotLimits:
+    """The drive's limits that bound how soon a robot on its way can be out of a mover's track:
+    speed (m/s), acceleration (m/s^2), body yaw rate (rad/s) and yaw acceleration (rad/s^2), and
+    the dead time plus yaw lag (s) before a command acts."""
+
+    v_max_mps: float
+    accel_mps2: float
+    yaw_rate_radps: float
+    yaw_accel_radps2: float
+    delay_s: float
+
+    @classmethod
+    def of(cls, config: HuskyCBFConfig) -> RobotLimits:
+        """husky-cbf's robot: its drive's limits, its commanded yaw-rate bound through the yaw
+        gain, and its measurement-to-action delay plus the yaw lag."""
+        r = config.response
+        return cls(
+            v_max_mps=min(config.nmpc.v_max_mps, r.max_linear_mps),
+            accel_mps2=r.max_linear_accel_mps2,
+            yaw_rate_radps=r.yaw_gain * config.omega_cmd_max_radps,
+            yaw_accel_radps2=r.max_angular_accel_radps2,
+            delay_s=config.measurement_delay_s + r.yaw_time_constant_s,
+        )
+
+    def leave_s(self, distance_m: float) -> float:
+        """A bound (s) on the time to move `distance_m` (m) across the robot's course: the delay,
+        a quarter turn from rest at the yaw limits, then the distance from rest at the speed and
+        acceleration limits (turn and drive in sequence, so the bound is on the safe side)."""
+        quarter_turn_s = 0.5 * math.pi / self.yaw_rate_radps + self.yaw_rate_radps / self.yaw_accel_radps2
+        drive_s = distance_m / self.v_max_mps + self.v_max_mps / self.accel_mps2
+        return self.delay_s + quarter_turn_s + drive_s
 
 
 class WaitBeside:
