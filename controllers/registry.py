@@ -49,6 +49,7 @@ class RobotFacts:
     pose_xy_std_m: float = 0.0  # localisation's position noise per axis (m)
     pose_yaw_std_rad: float = 0.0  # localisation's heading noise (rad)
     sensing_latency_s: float = 0.0  # how old the reported pose and obstacles are when they arrive (s)
+    sensor_fov_deg: float = 360.0  # the obstacle sensor's field of view, centred on the heading (deg)
 
 
 @dataclass(frozen=True)

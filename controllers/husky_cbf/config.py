@@ -341,6 +341,9 @@ class HuskyCBFConfig:
     #: pose predicted over this plus the drive's dead time under the commands already sent, and
     #: the obstacles predicted as far (delay.CommandPipe); a robot fact, not a tuning setting
     sensing_latency_s: float = 0.0
+    #: the obstacle sensor's field of view (deg, centred on the heading): what leaves it is
+    #: remembered (obstacle_memory.py); a robot fact, not a tuning setting
+    sensor_fov_deg: float = 360.0
     soft_penalty: float = setting(
         1e4,
         0.0,
@@ -389,6 +392,8 @@ class HuskyCBFConfig:
             raise ConfigError(f"nmpc.safety: husky-cbf is built on relax-cbf, got {self.nmpc.safety!r}")
         _positive("omega_cmd_max_radps", self.omega_cmd_max_radps)
         _non_negative("sensing_latency_s", self.sensing_latency_s)
+        if not 0.0 < self.sensor_fov_deg <= 360.0:
+            raise ConfigError(f"sensor_fov_deg: must be in (0, 360] deg, got {self.sensor_fov_deg}")
         if len(self.accel_weight) != 2 or len(self.terminal_weight) != 3:
             raise ConfigError("accel_weight, terminal_weight: two and three weights")
         check_ranges(self, "")

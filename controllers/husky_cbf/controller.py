@@ -4,7 +4,8 @@ Per control step:
 1. estimate the state: the initial state of the extended model at the instant the drive will act
    on this step's command (delay.py: after the drive's dead time), the pose and body yaw rate
    predicted over the sensing latency and the dead time from the measured pose and the estimated
-   yaw rate, under the commands already sent; and the filtered pose (localisation.py);
+   yaw rate, under the commands already sent; the filtered pose (localisation.py); and the
+   obstacles: those measured now and those remembered out of the sensor's view (obstacle_memory.py);
 2. build the Situation (behaviours/base.py): the reference's kind, the goal, the obstacles;
 3. the arbiter (arbiter.py) chooses the target: the reference itself, or a behaviour's or the
    planner's waypoint (recovery, yielding to movers, approach, detour);
@@ -29,12 +30,14 @@ import numpy as np
 from controllers.backends import FatropSolver, IpoptSolver, RawSolution
 from controllers.husky_cbf.arbiter import Arbiter, Decision
 from controllers.husky_cbf.behaviours.base import ReferenceKind, Situation
+from controllers.husky_cbf.behaviours.yield_to_movers import RobotLimits
 from controllers.husky_cbf.config import HuskyCBFConfig
 from controllers.husky_cbf.delay import CommandPipe
 from controllers.husky_cbf.footprint import disc_cover
 from controllers.husky_cbf.localisation import PoseFilter
 from controllers.husky_cbf.model import extended_step
 from controllers.husky_cbf.movers import MoverModel
+from controllers.husky_cbf.obstacle_memory import ObstacleMemory
 from controllers.husky_cbf.ocp import ExtendedPlan, Layout, pack_parameters, solver_for
 from controllers.husky_cbf.safety_filter import SafetyFilter
 from controllers.husky_cbf.turn_monitor import TurnMonitor
@@ -90,6 +93,7 @@ class HuskyCBFController:
         #: from now to the instant the first command acts (s): the prediction's span less the latency
         self._plan_start_s = max(self._pipe.delay_s - config.sensing_latency_s, 0.0)
         self._pose_filter = PoseFilter(config.pose_noise, base.tau_s)
+        self._memory = ObstacleMemory(config.sensor_fov_deg)
         self._turns = TurnMonitor(round(WEAK_TURN_WINDOW_S / base.tau_s), WEAK_TURN_MIN_RAD)
         self._filter = (
             SafetyFilter(
@@ -100,6 +104,8 @@ class HuskyCBFController:
                 config.movers.accel_bound_mps2,
                 config.measurement_delay_s,
                 config.yielding.horizon_s,
+                config.omega_cmd_max_radps,
+                RobotLimits.of(config).leave_s(2.0 * self._disc_radius),
             )
             if config.safety_filter
             else None
@@ -123,6 +129,7 @@ class HuskyCBFController:
         self._yaw_prev: float | None = None
         self.arbiter.reset()
         self._pose_filter.reset()
+        self._memory.reset()
         self._turns.reset()
         self._hard.reset()
         self._soft.reset()
@@ -290,7 +297,10 @@ class HuskyCBFController:
             return self._brake(
                 np.full(3, np.nan), n_real, len(obstacles) - n_real, start, "invalid state", False
             )
-        # 1. the state where the drive acts on this step's command, and the filtered pose
+        # 1. the state where the drive acts on this step's command, the filtered pose, and the
+        # obstacles measured now with those remembered out of the sensor's view
+        obstacles, ages = self._memory.update(pose, obstacles, t)
+        n_real = min(len(obstacles), cfg.slots)
         turn = self._measured_turn(pose)
         estimate = self._pose_filter.update(pose, self._predicted_speed, self._predicted_turn / base.tau_s)
         if turn is not None:
@@ -357,7 +367,7 @@ class HuskyCBFController:
         # 6. the safety filter
         filtered = False
         if self._filter is not None:
-            verdict = self._filter.filter(z0, plan.states[1:, 3:5], obstacles)
+            verdict = self._filter.filter(z0, plan.states[1:, 3:5], obstacles, ages)
             command, filtered = verdict.command, verdict.intervened
         # 7. the result
         self._advance(pose, omega_now, command)

@@ -33,6 +33,7 @@ def configure(inputs: ControllerInputs) -> HuskyCBFConfig:
         # what a localisation would report about its own noise
         pose_noise=PoseNoise(robot.pose_xy_std_m, robot.pose_yaw_std_rad),
         sensing_latency_s=robot.sensing_latency_s,
+        sensor_fov_deg=robot.sensor_fov_deg,
     )
     config = apply_settings(config, inputs.settings)
     return dataclasses.replace(config, slots=min(max(inputs.obstacle_count, 1), config.slots))

@@ -20,9 +20,14 @@ trajectory, or braking now, straight or along the arc now commanded.
 
 Standing in a mover's way. Braking is no refuge where a mover's constant-velocity track reaches
 the robot standing within the threat horizon (husky-cbf's yielding horizon: the horizon over
-which it steps aside from movers). There, if no cut passes the check, the longest cut of the plan
-that clears the movers' tracks without their growth is sent (an evasion, which the NMPC's own
-mover constraints shaped); if none does, the braking manoeuvre as above.
+which it steps aside from movers). There, if no cut passes the check, the filter looks for a
+manoeuvre that passes the same full check and ends out of every mover's way: the committed
+trajectory, braking, or an evasive backup (a command at the drive's full speed forwards or
+backwards, straight or on an arc, held for a few periods, then braking: Gurriet et al.'s set of
+backups); the one that keeps the most clearance is committed. Such a manoeuvre is a checked
+trajectory like any other. If none exists, the longest cut of the plan that clears the movers'
+tracks without their growth is sent (an evasion, which the NMPC's own mover constraints shaped);
+if none does, the braking manoeuvre as above.
 
 Why this bounds the robot's fault. A robot that stands cannot be at fault for a contact (passive
 motion safety: Macek et al. 2009; Bouraine, Fraichard and Salhi 2012), and every committed
@@ -56,6 +61,11 @@ MAX_BRAKING_S = 4.0
 #: A robot below these speeds (m/s, rad/s) stands.
 STANDING_MPS = 0.02
 STANDING_RADPS = 0.05
+#: Evasive backups: a command at the drive's full speed forwards and backwards, times these
+#: fractions of the commanded yaw-rate bound (straight, and arcs either way) ...
+EVASION_TURNS = (-0.5, 0.0, 0.5)
+#: ... held for these many seconds, then braking: from a short dash to a metre clear of a track
+EVASION_HOLDS_S = (0.3, 0.6, 1.0)
 
 
 @dataclass(frozen=True)
@@ -83,6 +93,8 @@ class SafetyFilter:
         mover_accel_bound_mps2: float,
         lead_s: float,
         threat_horizon_s: float,
+        omega_cmd_max_radps: float = 0.0,
+        trap_horizon_s: float = 0.0,
     ) -> None:
         self._r = response
         self._tau_s = tau_s
@@ -92,6 +104,10 @@ class SafetyFilter:
         self._accel_bound = mover_accel_bound_mps2
         self._lead_s = lead_s  # from the measurement to the instant z0 stands for (s)
         self._threat_s = threat_horizon_s  # how far ahead a standing robot looks for movers (s)
+        self._evasions = self._evasive_backups(omega_cmd_max_radps)
+        #: a passing plan whose stand a mover reaches this soon (s) gives way to an evasive backup
+        #: that ends out of every mover's way, if one passes: the robot could not leave in time
+        self._trap_s = trap_horizon_s
         self.reset()
 
     def reset(self) -> None:
@@ -129,6 +145,19 @@ class SafetyFilter:
         periods = max(math.ceil(abs(float(z0[3])) / (self._r.max_linear_accel_mps2 * self._tau_s)), 1)
         return [np.zeros((0, 2)), np.tile([0.0, float(z0[4])], (periods, 1))]
 
+    def _evasive_backups(self, omega_cmd_max_radps: float) -> list[np.ndarray]:
+        """The evasive backups as command sequences (EVASION_TURNS, EVASION_HOLDS_S); none without
+        a yaw-rate bound."""
+        if omega_cmd_max_radps <= 0.0:
+            return []
+        v = self._r.max_linear_mps
+        return [
+            np.tile([sign * v, turn * omega_cmd_max_radps], (max(round(hold_s / self._tau_s), 1), 1))
+            for sign in (1.0, -1.0)
+            for turn in EVASION_TURNS
+            for hold_s in EVASION_HOLDS_S
+        ]
+
     def clearance(
         self,
         times_s: np.ndarray,
@@ -144,15 +173,15 @@ class SafetyFilter:
     def _clearance(
         self, times_s: np.ndarray, poses: np.ndarray, data: np.ndarray, accel_bound_mps2: float | None
     ) -> float:
-        """clearance() against obstacle rows [x, y, vx, vy, r] (_obstacle_rows)."""
+        """clearance() against obstacle rows [x, y, vx, vy, r, age] (_obstacle_rows)."""
         if len(data) == 0:
             return math.inf
         bound_mps2 = self._accel_bound if accel_bound_mps2 is None else accel_bound_mps2
         if not (np.all(np.isfinite(data)) and np.all(np.isfinite(poses))):
             return -math.inf  # what cannot be checked does not pass
-        since = self._lead_s + times_s  # time since the measurement (s), (T,)
+        since = self._lead_s + times_s  # time since the obstacles were given (s), (T,)
         speed = np.hypot(data[:, 2], data[:, 3])
-        growth = np.where(speed > 0.0, 0.5 * bound_mps2 * since[-1] ** 2, 0.0)
+        growth = np.where(speed > 0.0, 0.5 * bound_mps2 * (data[:, 5] + since[-1]) ** 2, 0.0)
         # only obstacles that can come within the manoeuvre's reach need the full check
         reach = float(np.max(np.hypot(*(poses[:, :2] - poses[0, :2]).T))) + np.max(np.abs(self._offsets))
         start = data[:, 0:2] + data[:, 2:4] * since[0]
@@ -162,24 +191,33 @@ class SafetyFilter:
             return math.inf
         data, speed = data[near], speed[near]
         centres = data[None, :, 0:2] + data[None, :, 2:4] * since[:, None, None]  # (T, M, 2)
-        grown = data[None, :, 4] + np.where(speed[None, :] > 0.0, 0.5 * bound_mps2 * since[:, None] ** 2, 0.0)
+        aged = data[None, :, 5] + since[:, None]  # time since each was measured (s), (T, M)
+        grown = data[None, :, 4] + np.where(speed[None, :] > 0.0, 0.5 * bound_mps2 * aged**2, 0.0)
         heading = np.stack([np.cos(poses[:, 2]), np.sin(poses[:, 2])], axis=1)  # (T, 2)
         discs = poses[:, None, :2] + self._offsets[None, :, None] * heading[:, None, :]  # (T, D, 2)
         gaps = np.linalg.norm(discs[:, :, None, :] - centres[:, None, :, :], axis=3)  # (T, D, M)
         return float(np.min(gaps - self._disc_radius - grown[:, None, :]))
 
-    def filter(self, z0: np.ndarray, plan: np.ndarray, obstacles: Sequence[Obstacle]) -> FilterVerdict:
+    def filter(
+        self,
+        z0: np.ndarray,
+        plan: np.ndarray,
+        obstacles: Sequence[Obstacle],
+        ages_s: Sequence[float] | None = None,
+    ) -> FilterVerdict:
         """The command to send now, given the NMPC's planned commands `plan` ((k, 2) [v, omega]
         per control period, one (2,) command, or none): its first, if a cut of the plan passes the
         check (the longest becomes the committed trajectory); else, where the fallback below would
         stand in a mover's way (a mover's track reaches it within the threat horizon), the longest
         cut of the plan that clears the movers' tracks without their growth; else the committed
         trajectory's next command if it still passes; else the braking manoeuvre that keeps the
-        most clearance. A plan that is not finite has no cut that passes."""
+        most clearance. A plan that is not finite has no cut that passes. `ages_s`: how long before
+        now each obstacle was measured (obstacle_memory.py; default all now): a mover's circle grows
+        over its age too."""
         plan = np.asarray(plan, dtype=float).reshape(-1, 2)
         if not (np.all(np.isfinite(plan)) and np.all(np.isfinite(z0))):
             plan = np.zeros((0, 2))
-        data = _obstacle_rows(obstacles)
+        data = _obstacle_rows(obstacles, ages_s)
         cuts: dict[int, tuple[np.ndarray, np.ndarray]] = {}  # each cut's manoeuvre, integrated once
 
         def longest_clear_cut(accel_bound_mps2: float) -> tuple[int, float] | None:
@@ -196,6 +234,13 @@ class SafetyFilter:
         cut = longest_clear_cut(self._accel_bound)
         if cut is not None:
             k, clearance_m = cut
+            times, poses = cuts[k]
+            if self._hit_standing(times[-1], poses[-1], data, self._trap_s):
+                way_out = self._way_out(z0, data, self._evasions, self._trap_s)
+                if way_out is not None:
+                    commands, out_m = way_out
+                    self._committed = commands[1:].copy()
+                    return FilterVerdict(commands[0].copy(), True, out_m)
             self._committed = plan[1:k].copy()
             return FilterVerdict(plan[0].copy(), False, clearance_m)
         chosen, run = self._committed, self.manoeuvre(z0, self._committed)
@@ -207,7 +252,14 @@ class SafetyFilter:
                 options.append((self._clearance(*backup_run, data, None), backup, backup_run))
             clearance_m, chosen, run = max(options, key=lambda option: option[0])
         times, poses = run
-        if self._hit_standing(times[-1], poses[-1], data):
+        if self._hit_standing(times[-1], poses[-1], data, self._threat_s):
+            way_out = self._way_out(
+                z0, data, [self._committed, *self._braking(z0), *self._evasions], self._threat_s
+            )
+            if way_out is not None:
+                commands, out_m = way_out
+                self._committed = commands[1:].copy()
+                return FilterVerdict(commands[0].copy() if len(commands) else np.zeros(2), True, out_m)
             cut = longest_clear_cut(0.0)
             if cut is not None:
                 k, evading_m = cut
@@ -217,14 +269,30 @@ class SafetyFilter:
         self._committed = chosen[1:].copy()
         return FilterVerdict(command, True, clearance_m)
 
-    def _hit_standing(self, stand_s: float, pose: np.ndarray, data: np.ndarray) -> bool:
+    def _way_out(
+        self, z0: np.ndarray, data: np.ndarray, candidates: Sequence[np.ndarray], horizon_s: float
+    ) -> tuple[np.ndarray, float] | None:
+        """Among the command sequences `candidates`, the manoeuvre that passes the full check and
+        ends out of every mover's way within `horizon_s` (_hit_standing) with the most clearance,
+        and that clearance (m); None when none does."""
+        best: tuple[np.ndarray, float] | None = None
+        for commands in candidates:
+            times, poses = self.manoeuvre(z0, commands)
+            clearance_m = self._clearance(times, poses, data, None)
+            if clearance_m < 0.0 or (best is not None and clearance_m <= best[1]):
+                continue
+            if not self._hit_standing(times[-1], poses[-1], data, horizon_s):
+                best = (commands, clearance_m)
+        return best
+
+    def _hit_standing(self, stand_s: float, pose: np.ndarray, data: np.ndarray, horizon_s: float) -> bool:
         """Whether a mover (a row of `data` with a velocity, _obstacle_rows) at constant velocity,
         not grown, reaches a body disc of a robot standing at `pose` from `stand_s` (s from z0)
-        within the threat horizon."""
+        within `horizon_s`."""
         data = data[(data[:, 2] != 0.0) | (data[:, 3] != 0.0)]
-        if len(data) == 0 or self._threat_s <= 0.0:
+        if len(data) == 0 or horizon_s <= 0.0:
             return False
-        since = self._lead_s + stand_s + np.arange(0.0, self._threat_s + STEP_S, 5 * STEP_S)
+        since = self._lead_s + stand_s + np.arange(0.0, horizon_s + STEP_S, 5 * STEP_S)
         centres = data[None, :, 0:2] + data[None, :, 2:4] * since[:, None, None]  # (T, M, 2)
         heading = np.array([math.cos(pose[2]), math.sin(pose[2])])
         discs = pose[None, :2] + self._offsets[:, None] * heading[None, :]  # (D, 2)
@@ -232,6 +300,9 @@ class SafetyFilter:
         return bool(np.any(gaps < data[None, :, 4, None] + self._disc_radius))
 
 
-def _obstacle_rows(obstacles: Sequence[Obstacle]) -> np.ndarray:
-    """(M, 5) rows [x, y, vx, vy, r] (m, m/s) of the obstacles, read once per filtered step."""
-    return np.array([(o.x_m, o.y_m, o.vx_mps, o.vy_mps, o.radius_m) for o in obstacles]).reshape(-1, 5)
+def _obstacle_rows(obstacles: Sequence[Obstacle], ages_s: Sequence[float] | None = None) -> np.ndarray:
+    """(M, 6) rows [x, y, vx, vy, r, age] (m, m/s, s) of the obstacles, read once per filtered
+    step; age: how long before they were given each was measured (0: just now)."""
+    ages = np.zeros(len(obstacles)) if ages_s is None else np.asarray(ages_s, dtype=float)
+    rows = [(o.x_m, o.y_m, o.vx_mps, o.vy_mps, o.radius_m, a) for o, a in zip(obstacles, ages, strict=True)]
+    return np.array(rows, dtype=float).reshape(-1, 6)

@@ -93,6 +93,7 @@ def robot_facts(sc: Scenario) -> RobotFacts:
         pose_xy_std_m=sc.sensing.pose_xy_std_m,
         pose_yaw_std_rad=sc.sensing.pose_yaw_std_rad,
         sensing_latency_s=sc.sensing.latency_steps * sc.tau_s,
+        sensor_fov_deg=sc.sensing.fov_deg,
     )
 
 

@@ -22,9 +22,12 @@ RESPONSE = RobotResponse(
 DISCS = np.array([-0.33, 0.0, 0.33])
 
 
-def _filter(accel_bound: float = 0.5, lead_s: float = 0.0, threat_s: float = 0.0) -> SafetyFilter:
-    """A filter for the test robot; threat_s 0: standing is always a refuge."""
-    return SafetyFilter(RESPONSE, 0.1, DISCS, 0.38, accel_bound, lead_s, threat_s)
+def _filter(
+    accel_bound: float = 0.5, lead_s: float = 0.0, threat_s: float = 0.0, trap_s: float = 0.0
+) -> SafetyFilter:
+    """A filter for the test robot; threat_s 0: standing is always a refuge; trap_s 0: a plan that
+    passes is never traded for an evasive backup."""
+    return SafetyFilter(RESPONSE, 0.1, DISCS, 0.38, accel_bound, lead_s, threat_s, 2.0, trap_s)
 
 
 def _moving_at(v_mps: float) -> np.ndarray:
@@ -156,3 +159,30 @@ def test_what_cannot_be_checked_does_not_pass() -> None:
     assert f.clearance(*f.manoeuvre(_moving_at(0.5), None), unmeasured) == -math.inf
     empty = f.filter(_moving_at(0.5), np.zeros((0, 2)), [])
     assert empty.intervened and np.array_equal(empty.command, np.zeros(2))
+
+
+def test_a_plan_that_would_stand_in_a_walker_s_way_gives_way_to_a_checked_evasive_backup() -> None:
+    """A robot creeping east with a walker coming at it from the north: every cut of the plan
+    passes the check (the walker is still far), but each ends standing where the walker arrives
+    within the trap horizon. With one, the filter commits an evasive backup that passes the same
+    full check and ends out of the walker's way; without, the plan is kept."""
+    creeping = np.tile([0.2, 0.0], (5, 1))
+    walker = [Obstacle(0.1, 3.0, 0.3, 0.0, -1.0)]
+    kept = _filter(accel_bound=0.0).filter(_moving_at(0.2), creeping, walker)
+    assert not kept.intervened and np.array_equal(kept.command, creeping[0])
+    f = _filter(accel_bound=0.0, trap_s=3.0)
+    evading = f.filter(_moving_at(0.2), creeping, walker)
+    assert evading.intervened and evading.clearance_m >= 0.0
+    assert abs(evading.command[0]) == RESPONSE.max_linear_mps  # a dash at the drive's full speed
+    times, poses = f.manoeuvre(_moving_at(0.2), np.vstack([evading.command, f._committed]))
+    assert f.clearance(times, poses, walker, 0.0) >= 0.0
+    assert abs(poses[-1, 0]) > 0.3 + 0.33 + 0.38  # it stands clear of the walker's track
+
+
+def test_a_remembered_mover_s_circle_grows_over_its_age() -> None:
+    """A walker measured a while ago (obstacle_memory.py) is as uncertain as its age: beside the
+    way, it passes the check measured now and not measured two seconds ago."""
+    command = np.array([0.5, 0.0])
+    beside = [Obstacle(1.0, 1.6, 0.3, 0.0, 1e-3)]
+    assert not _filter(accel_bound=0.5).filter(_moving_at(0.5), command, beside, [0.0]).intervened
+    assert _filter(accel_bound=0.5).filter(_moving_at(0.5), command, beside, [2.0]).intervened
