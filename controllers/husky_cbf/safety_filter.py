@@ -21,13 +21,16 @@ trajectory, or braking now, straight or along the arc now commanded.
 Standing in a mover's way. Braking is no refuge where a mover's constant-velocity track reaches
 the robot standing within the threat horizon (husky-cbf's yielding horizon: the horizon over
 which it steps aside from movers). There, if no cut passes the check, the filter looks for a
-manoeuvre that passes the same full check and ends out of every mover's way: the committed
-trajectory, braking, or an evasive backup (a command at the drive's full speed forwards or
-backwards, straight or on an arc, held for a few periods, then braking: Gurriet et al.'s set of
-backups); the one that keeps the most clearance is committed. Such a manoeuvre is a checked
-trajectory like any other. If none exists, the longest cut of the plan that clears the movers'
-tracks without their growth is sent (an evasion, which the NMPC's own mover constraints shaped);
-if none does, the braking manoeuvre as above.
+way out: a manoeuvre that passes the same full check and ends out of every mover's way, among
+the committed trajectory, braking, and the evasive backups (a command at the drive's full speed
+forwards or backwards, straight or on an arc, held for a few periods, then braking: Gurriet et
+al.'s set of backups); the committed one if it is a way out (a way out taken goes on), else the
+one that keeps the most clearance. The same holds, over the shorter trap horizon (how soon a
+standing robot could leave a mover's track), where a cut passes but only one short of the whole
+plan: the robot is about to brake where that cut ends. A way out is a checked trajectory like any
+other. If none exists, the longest cut of the plan that clears the movers' tracks without their
+growth is sent (an evasion, which the NMPC's own mover constraints shaped); if none does, the
+braking manoeuvre as above.
 
 Why this bounds the robot's fault. A robot that stands cannot be at fault for a contact (passive
 motion safety: Macek et al. 2009; Bouraine, Fraichard and Salhi 2012), and every committed
@@ -235,12 +238,14 @@ class SafetyFilter:
         if cut is not None:
             k, clearance_m = cut
             times, poses = cuts[k]
-            if self._hit_standing(times[-1], poses[-1], data, self._trap_s):
-                way_out = self._way_out(z0, data, self._evasions, self._trap_s)
+            # the plan is being cut: the robot is about to brake where its cut ends
+            if k < len(plan) and self._hit_standing(times[-1], poses[-1], data, self._trap_s):
+                # the rest of a way out already taken goes on, if it still is one: no dithering
+                way_out = self._way_out(z0, data, [self._committed, *self._evasions], self._trap_s)
                 if way_out is not None:
                     commands, out_m = way_out
                     self._committed = commands[1:].copy()
-                    return FilterVerdict(commands[0].copy(), True, out_m)
+                    return FilterVerdict(commands[0].copy() if len(commands) else np.zeros(2), True, out_m)
             self._committed = plan[1:k].copy()
             return FilterVerdict(plan[0].copy(), False, clearance_m)
         chosen, run = self._committed, self.manoeuvre(z0, self._committed)
@@ -272,17 +277,21 @@ class SafetyFilter:
     def _way_out(
         self, z0: np.ndarray, data: np.ndarray, candidates: Sequence[np.ndarray], horizon_s: float
     ) -> tuple[np.ndarray, float] | None:
-        """Among the command sequences `candidates`, the manoeuvre that passes the full check and
-        ends out of every mover's way within `horizon_s` (_hit_standing) with the most clearance,
-        and that clearance (m); None when none does."""
+        """The first of the command sequences `candidates` if it is a way out, else the one with
+        the most clearance among those that are (a way out: its manoeuvre passes the full check
+        and ends out of every mover's way within `horizon_s`, _hit_standing), and its clearance
+        (m); None when none is. The first is the committed trajectory: a way out already taken
+        goes on."""
         best: tuple[np.ndarray, float] | None = None
-        for commands in candidates:
+        for i, commands in enumerate(candidates):
             times, poses = self.manoeuvre(z0, commands)
             clearance_m = self._clearance(times, poses, data, None)
             if clearance_m < 0.0 or (best is not None and clearance_m <= best[1]):
                 continue
             if not self._hit_standing(times[-1], poses[-1], data, horizon_s):
                 best = (commands, clearance_m)
+                if i == 0 and len(commands):
+                    return best
         return best
 
     def _hit_standing(self, stand_s: float, pose: np.ndarray, data: np.ndarray, horizon_s: float) -> bool:

@@ -9,6 +9,7 @@ import numpy as np
 
 from controllers.husky_cbf.config import RobotResponse
 from controllers.husky_cbf.safety_filter import SafetyFilter
+from controllers.husky_cbf.safety_filter import _obstacle_rows as sf_rows
 from controllers.obstacles import Obstacle
 
 RESPONSE = RobotResponse(
@@ -162,21 +163,25 @@ def test_what_cannot_be_checked_does_not_pass() -> None:
 
 
 def test_a_plan_that_would_stand_in_a_walker_s_way_gives_way_to_a_checked_evasive_backup() -> None:
-    """A robot creeping east with a walker coming at it from the north: every cut of the plan
-    passes the check (the walker is still far), but each ends standing where the walker arrives
-    within the trap horizon. With one, the filter commits an evasive backup that passes the same
-    full check and ends out of the walker's way; without, the plan is kept."""
-    creeping = np.tile([0.2, 0.0], (5, 1))
-    walker = [Obstacle(0.1, 3.0, 0.3, 0.0, -1.0)]
-    kept = _filter(accel_bound=0.0).filter(_moving_at(0.2), creeping, walker)
+    """A robot creeping east towards a post, with a walker coming at it from the north: the plan is
+    cut short of the post (its longest passing cut ends before its last command), and that cut
+    ends standing where the walker arrives within the trap horizon. With a trap horizon the filter
+    commits an evasive backup that passes the same full check and ends out of the walker's way;
+    without one, or with a plan that passes whole, the plan is kept."""
+    creeping = np.tile([0.2, 0.0], (30, 1))
+    post = Obstacle(1.5, 0.0, 0.3)
+    walker = Obstacle(0.6, 3.5, 0.3, 0.0, -1.0)  # crosses the way just after the cut's stand
+    kept = _filter(accel_bound=0.0).filter(_moving_at(0.2), creeping, [post, walker])
     assert not kept.intervened and np.array_equal(kept.command, creeping[0])
+    whole = _filter(accel_bound=0.0, trap_s=3.0).filter(_moving_at(0.2), creeping[:5], [post, walker])
+    assert not whole.intervened  # the whole plan passes: the NMPC is not about to brake
     f = _filter(accel_bound=0.0, trap_s=3.0)
-    evading = f.filter(_moving_at(0.2), creeping, walker)
+    evading = f.filter(_moving_at(0.2), creeping, [post, walker])
     assert evading.intervened and evading.clearance_m >= 0.0
     assert abs(evading.command[0]) == RESPONSE.max_linear_mps  # a dash at the drive's full speed
     times, poses = f.manoeuvre(_moving_at(0.2), np.vstack([evading.command, f._committed]))
-    assert f.clearance(times, poses, walker, 0.0) >= 0.0
-    assert abs(poses[-1, 0]) > 0.3 + 0.33 + 0.38  # it stands clear of the walker's track
+    assert f.clearance(times, poses, [post, walker], 0.0) >= 0.0
+    assert not f._hit_standing(times[-1], poses[-1], sf_rows([post, walker]), 3.0)
 
 
 def test_a_remembered_mover_s_circle_grows_over_its_age() -> None:
