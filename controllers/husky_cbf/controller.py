@@ -36,7 +36,7 @@ from controllers.husky_cbf.delay import CommandPipe
 from controllers.husky_cbf.footprint import disc_cover
 from controllers.husky_cbf.localisation import PoseFilter
 from controllers.husky_cbf.model import extended_step
-from controllers.husky_cbf.movers import MoverModel
+from controllers.husky_cbf.movers import MoverModel, is_static
 from controllers.husky_cbf.obstacle_memory import ObstacleMemory
 from controllers.husky_cbf.ocp import ExtendedPlan, Layout, pack_parameters, solver_for
 from controllers.husky_cbf.safety_filter import SafetyFilter
@@ -56,10 +56,13 @@ SLACK_TOL = 1e-6
 YAW_RATE_CORRECTION = 0.5
 #: Tracking: the goal is the reference this far (s) ahead, so that it leads the robot on ...
 TRACKING_PREVIEW_S = 1.0
-#: ... or the first later point outside every inflated obstacle, searched this far (s) past it:
-#: at the slowest trajectory (behaviours.base.SLOW_REFERENCE_MPS) that passes 3 m, wider than an
-#: inflated obstacle, so the goal lies beyond what stands on the reference, never inside it.
-TRACKING_SEARCH_S = 30.0
+#: ... or the first later point outside every inflated obstacle, searched this far (s) past it
+#: (a mover covering the reference now is soon gone) ...
+TRACKING_SEARCH_S = 5.0
+#: ... past the first point clear of the static obstacles, searched this far (s): at the slowest
+#: trajectory (behaviours.base.SLOW_REFERENCE_MPS) that passes 3 m, wider than an inflated
+#: obstacle, so the goal lies beyond what stands on the reference, never inside it
+STATIC_SEARCH_S = 30.0
 #: Turn monitor (turn_monitor.py): over this window (s), once the model predicted at least
 #: WEAK_TURN_MIN_RAD of heading change, ...
 WEAK_TURN_WINDOW_S = 1.6
@@ -167,7 +170,8 @@ class HuskyCBFController:
         set_point = isinstance(reference, SetPoint)
         kind = ReferenceKind.of(set_point, float(ref_controls[0, 0]))
         circles = self.movers.body_circles(obstacles, pose[:2])
-        goal = ref_states[-1] if set_point else self._tracking_goal(reference, circles, t)
+        static = np.array([is_static(o) for o in obstacles], dtype=bool)
+        goal = ref_states[-1] if set_point else self._tracking_goal(reference, circles, static, t)
         return Situation(
             pose=pose,
             estimate=estimate,
@@ -182,16 +186,22 @@ class HuskyCBFController:
             t=t,
         )
 
-    def _tracking_goal(self, reference: Reference, circles: np.ndarray, t: float) -> np.ndarray:
+    def _tracking_goal(
+        self, reference: Reference, circles: np.ndarray, static: np.ndarray, t: float
+    ) -> np.ndarray:
         """The reference TRACKING_PREVIEW_S ahead, or the first later one outside every inflated
-        obstacle (`circles`, MoverModel.body_circles)."""
-        steps = round(TRACKING_SEARCH_S / self.tau_s)
+        obstacle (`circles`, MoverModel.body_circles; `static`: which of them are static): searched
+        TRACKING_SEARCH_S from the first point clear of the static ones (STATIC_SEARCH_S at most)."""
+        steps = round(STATIC_SEARCH_S / self.tau_s)
         states = reference.sample(t + TRACKING_PREVIEW_S, self.tau_s, steps)[0]
         if circles.size == 0:
             return states[0]
         gaps = np.hypot(states[:, None, 0] - circles[:, 0], states[:, None, 1] - circles[:, 1])
-        clear = np.all(gaps > circles[:, 2], axis=1)
-        return states[int(np.argmax(clear))] if clear.any() else states[0]
+        outside = gaps > circles[:, 2]
+        clear_of_static = np.all(outside[:, static], axis=1)
+        first = int(np.argmax(clear_of_static)) if clear_of_static.any() else 0
+        window = np.all(outside[first : first + round(TRACKING_SEARCH_S / self.tau_s)], axis=1)
+        return states[first + int(np.argmax(window))] if window.any() else states[first]
 
     # -- 4. the NMPC's reference and limits -------------------------------------------------
     def _feed_forward(self, sampled: tuple[np.ndarray, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
