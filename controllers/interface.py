@@ -52,7 +52,7 @@ class ControlResult:
     #: the controller found itself making no progress and follows a recovery waypoint
     escape: str = ""
     #: a safety filter sent another command than the plan's first (husky-cbf's safety_filter.py):
-    #: no cut of the plan passed its check, so the committed trajectory or a braking backup went
+    #: the committed trajectory, a braking or evasive backup, or an evasion went instead
     filtered: bool = False
 
     @property

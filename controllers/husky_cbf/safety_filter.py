@@ -73,10 +73,10 @@ EVASION_HOLDS_S = (0.3, 0.6, 1.0)
 
 @dataclass(frozen=True)
 class FilterVerdict:
-    """The command to send; whether the filter intervened (no cut of the plan passed the check:
-    the command is the committed trajectory's, a braking backup's, or an evasion's checked against
-    the movers' ungrown tracks only); and the smallest clearance (m) of the trajectory it begins,
-    as checked (negative: a predicted contact)."""
+    """The command to send; whether the filter intervened (the command is not the plan's first:
+    it is the committed trajectory's, a braking or evasive backup's, or an evasion's checked
+    against the movers' ungrown tracks only); and the smallest clearance (m) of the trajectory it
+    begins, as checked (negative: a predicted contact)."""
 
     command: np.ndarray
     intervened: bool

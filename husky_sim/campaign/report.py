@@ -68,8 +68,8 @@ def write_report(
         f"{len(rows)} runs of {len(tasks)}; {spec.count} layouts per family, seed {spec.seed}. Each failure "
         f"rate is `failures/runs (rate, <= its exact one-sided {CONFIDENCE:.0%} upper bound)` "
         "(Clopper-Pearson). `filtered runs`: runs in which a safety filter intervened at least once "
-        "(no cut of the plan passed its check); `solve p99`: the median over the runs of each run's 99th "
-        "percentile solve time (wall clock, this machine).",
+        "(it sent another command than the plan's first); `solve p99`: the median over the runs of "
+        "each run's 99th percentile solve time (wall clock, this machine).",
         "",
         "| family | runs | reached | "
         + " | ".join(c.replace("_", " ") for c in FAILURES)

@@ -7,7 +7,9 @@ within its radius plus the robot's inflation plus yielding.margin_m (or plus the
 that mover and the planner's release margin, if that is more) is on a collision course, and the
 step aside is the point that much to the side of the mover's relative line.
 
-- StepAside: from the robot itself, judged at the velocity the robot means to have.
+- StepAside: from the robot itself, judged at the velocity the robot means to have; on a moving
+  reference, from the reference point at its velocity, once the drive's limits leave no later
+  time (RobotLimits.leave_s), to the side behind the mover.
 - WaitBeside: on the way back to a slow trajectory's point, with a mover on course to that point:
   where the robot would step aside to from the point, on the robot's own side of the mover's line.
 - BraceAcross: at a slow trajectory's point, with a mover on course to it within a longer horizon:
@@ -118,15 +120,14 @@ class SideStep:
         if threat is None:
             self.side = 0.0
             return None
-        if not self.side:
+        if not self.side and behind_mover and side_of is None:
+            ahead = [threat.track_gap_m(point_xy + threat.step_m(side)) for side in (-1.0, 1.0)]
+            self.side = -1.0 if ahead[0] > ahead[1] else 1.0
+        elif not self.side:
             offset = float(threat.closest_m @ threat.normal)  # > 0: the mover passes left of the point
             if side_of is not None:  # ... left of `side_of`
                 offset -= float((np.asarray(side_of, dtype=float) - point_xy) @ threat.normal)
-            if behind_mover and side_of is None:
-                ahead = [threat.track_gap_m(point_xy + threat.step_m(side)) for side in (-1.0, 1.0)]
-                self.side = -1.0 if ahead[0] > ahead[1] else 1.0
-            else:  # step to the other side (left if dead ahead)
-                self.side = -1.0 if offset > DEAD_AHEAD_M else 1.0
+            self.side = -1.0 if offset > DEAD_AHEAD_M else 1.0  # the other side (left if dead ahead)
         step = threat.step_m(self.side)
         target = point_xy + step
         heading = nearer_way(math.atan2(step[1], step[0]), heading_rad)  # reversing if that turns less
