@@ -108,8 +108,8 @@ class SafetyFilter:
         self._lead_s = lead_s  # from the measurement to the instant z0 stands for (s)
         self._threat_s = threat_horizon_s  # how far ahead a standing robot looks for movers (s)
         self._evasions = self._evasive_backups(omega_cmd_max_radps)
-        #: a passing plan whose stand a mover reaches this soon (s) gives way to an evasive backup
-        #: that ends out of every mover's way, if one passes: the robot could not leave in time
+        #: a plan cut short whose stand a mover reaches this soon (s) gives way to a way out, if
+        #: one exists: from that stand the robot could not leave in time
         self._trap_s = trap_horizon_s
         self.reset()
 
@@ -210,13 +210,14 @@ class SafetyFilter:
     ) -> FilterVerdict:
         """The command to send now, given the NMPC's planned commands `plan` ((k, 2) [v, omega]
         per control period, one (2,) command, or none): its first, if a cut of the plan passes the
-        check (the longest becomes the committed trajectory); else, where the fallback below would
-        stand in a mover's way (a mover's track reaches it within the threat horizon), the longest
-        cut of the plan that clears the movers' tracks without their growth; else the committed
-        trajectory's next command if it still passes; else the braking manoeuvre that keeps the
-        most clearance. A plan that is not finite has no cut that passes. `ages_s`: how long before
-        now each obstacle was measured (obstacle_memory.py; default all now): a mover's circle grows
-        over its age too."""
+        check (the longest becomes the committed trajectory), unless that cut is short of the whole
+        plan and ends where a mover reaches the standing robot within the trap horizon and a way
+        out exists (module docstring); else the committed trajectory's next command if it still
+        passes, else the braking manoeuvre that keeps the most clearance; where that fallback would
+        stand in a mover's way within the threat horizon, a way out if one exists, else the
+        longest cut of the plan that clears the movers' tracks without their growth. A plan that
+        is not finite has no cut that passes. `ages_s`: how long before now each obstacle was
+        measured (obstacle_memory.py; default all now): a mover's circle grows over its age too."""
         plan = np.asarray(plan, dtype=float).reshape(-1, 2)
         if not (np.all(np.isfinite(plan)) and np.all(np.isfinite(z0))):
             plan = np.zeros((0, 2))
@@ -243,9 +244,7 @@ class SafetyFilter:
                 # the rest of a way out already taken goes on, if it still is one: no dithering
                 way_out = self._way_out(z0, data, [self._committed, *self._evasions], self._trap_s)
                 if way_out is not None:
-                    commands, out_m = way_out
-                    self._committed = commands[1:].copy()
-                    return FilterVerdict(commands[0].copy() if len(commands) else np.zeros(2), True, out_m)
+                    return self._commit(*way_out)
             self._committed = plan[1:k].copy()
             return FilterVerdict(plan[0].copy(), False, clearance_m)
         chosen, run = self._committed, self.manoeuvre(z0, self._committed)
@@ -262,9 +261,7 @@ class SafetyFilter:
                 z0, data, [self._committed, *self._braking(z0), *self._evasions], self._threat_s
             )
             if way_out is not None:
-                commands, out_m = way_out
-                self._committed = commands[1:].copy()
-                return FilterVerdict(commands[0].copy() if len(commands) else np.zeros(2), True, out_m)
+                return self._commit(*way_out)
             cut = longest_clear_cut(0.0)
             if cut is not None:
                 k, evading_m = cut
@@ -273,6 +270,12 @@ class SafetyFilter:
         command = chosen[0].copy() if len(chosen) else np.zeros(2)
         self._committed = chosen[1:].copy()
         return FilterVerdict(command, True, clearance_m)
+
+    def _commit(self, commands: np.ndarray, clearance_m: float) -> FilterVerdict:
+        """Commit a way out (command sequence `commands`, empty: braking now) and send its first
+        command, as an intervention."""
+        self._committed = commands[1:].copy()
+        return FilterVerdict(commands[0].copy() if len(commands) else np.zeros(2), True, clearance_m)
 
     def _way_out(
         self, z0: np.ndarray, data: np.ndarray, candidates: Sequence[np.ndarray], horizon_s: float
