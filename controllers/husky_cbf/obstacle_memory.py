@@ -25,6 +25,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from controllers.husky_cbf.movers import is_static
+from controllers.husky_cbf.planner import segment_blocked
 from controllers.obstacles import Obstacle
 
 #: A mover out of view is predicted this long (s) at most: long enough to cover a walker crossing
@@ -109,12 +110,5 @@ class ObstacleMemory:
         half_width = math.asin(min(ob.radius_m / distance, 1.0))  # the circle's angular half width
         if abs(bearing) + half_width > self.half_fov_rad:
             return False
-        a, d = np.asarray(pose[:2], dtype=float), np.array([dx, dy])
-        for seen in measured:
-            if not is_static(seen):
-                continue
-            rel = np.array([seen.x_m, seen.y_m]) - a
-            s = float(rel @ d) / (distance * distance)
-            if 0.0 < s < 1.0 and math.hypot(*(rel - s * d)) < seen.radius_m:
-                return False  # hidden behind it
-        return True
+        occluders = np.array([(o.x_m, o.y_m, o.radius_m) for o in measured if is_static(o)]).reshape(-1, 3)
+        return not segment_blocked(np.asarray(pose[:2], dtype=float), np.array([ob.x_m, ob.y_m]), occluders)

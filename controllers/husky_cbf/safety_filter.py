@@ -49,7 +49,7 @@ movers' tracks only.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -222,15 +222,20 @@ class SafetyFilter:
         if not (np.all(np.isfinite(plan)) and np.all(np.isfinite(z0))):
             plan = np.zeros((0, 2))
         data = _obstacle_rows(obstacles, ages_s)
-        cuts: dict[int, tuple[np.ndarray, np.ndarray]] = {}  # each cut's manoeuvre, integrated once
+        runs: dict[bytes, tuple[np.ndarray, np.ndarray]] = {}  # each manoeuvre, integrated once
+
+        def run_of(commands: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+            """The manoeuvre of a command sequence from z0 (SafetyFilter.manoeuvre), this step."""
+            key = np.ascontiguousarray(commands, dtype=float).reshape(-1, 2).tobytes()
+            if key not in runs:
+                runs[key] = self.manoeuvre(z0, commands)
+            return runs[key]
 
         def longest_clear_cut(accel_bound_mps2: float) -> tuple[int, float] | None:
             """The longest cut k whose manoeuvre clears every obstacle with movers grown at
             accel_bound_mps2, and its clearance (m); None when no cut does."""
             for k in range(len(plan), 0, -1):
-                if k not in cuts:
-                    cuts[k] = self.manoeuvre(z0, plan[:k])
-                clearance_m = self._clearance(*cuts[k], data, accel_bound_mps2)
+                clearance_m = self._clearance(*run_of(plan[:k]), data, accel_bound_mps2)
                 if clearance_m >= 0.0:
                     return k, clearance_m
             return None
@@ -238,27 +243,27 @@ class SafetyFilter:
         cut = longest_clear_cut(self._accel_bound)
         if cut is not None:
             k, clearance_m = cut
-            times, poses = cuts[k]
+            times, poses = run_of(plan[:k])
             # the plan is being cut: the robot is about to brake where its cut ends
             if k < len(plan) and self._hit_standing(times[-1], poses[-1], data, self._trap_s):
                 # the rest of a way out already taken goes on, if it still is one: no dithering
-                way_out = self._way_out(z0, data, [self._committed, *self._evasions], self._trap_s)
+                way_out = self._way_out(run_of, data, [self._committed, *self._evasions], self._trap_s)
                 if way_out is not None:
                     return self._commit(*way_out)
             self._committed = plan[1:k].copy()
             return FilterVerdict(plan[0].copy(), False, clearance_m)
-        chosen, run = self._committed, self.manoeuvre(z0, self._committed)
+        chosen, run = self._committed, run_of(self._committed)
         clearance_m = self._clearance(*run, data, None)
         if clearance_m < 0.0:
             options = [(clearance_m, chosen, run)]
             for backup in self._braking(z0):
-                backup_run = self.manoeuvre(z0, backup)
+                backup_run = run_of(backup)
                 options.append((self._clearance(*backup_run, data, None), backup, backup_run))
             clearance_m, chosen, run = max(options, key=lambda option: option[0])
         times, poses = run
         if self._hit_standing(times[-1], poses[-1], data, self._threat_s):
             way_out = self._way_out(
-                z0, data, [self._committed, *self._braking(z0), *self._evasions], self._threat_s
+                run_of, data, [self._committed, *self._braking(z0), *self._evasions], self._threat_s
             )
             if way_out is not None:
                 return self._commit(*way_out)
@@ -278,16 +283,20 @@ class SafetyFilter:
         return FilterVerdict(commands[0].copy() if len(commands) else np.zeros(2), True, clearance_m)
 
     def _way_out(
-        self, z0: np.ndarray, data: np.ndarray, candidates: Sequence[np.ndarray], horizon_s: float
+        self,
+        run_of: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]],
+        data: np.ndarray,
+        candidates: Sequence[np.ndarray],
+        horizon_s: float,
     ) -> tuple[np.ndarray, float] | None:
         """The first of the command sequences `candidates` if it is a way out, else the one with
         the most clearance among those that are (a way out: its manoeuvre passes the full check
         and ends out of every mover's way within `horizon_s`, _hit_standing), and its clearance
         (m); None when none is. The first is the committed trajectory: a way out already taken
-        goes on."""
+        goes on. `run_of` gives a sequence's manoeuvre (integrated once per step)."""
         best: tuple[np.ndarray, float] | None = None
         for i, commands in enumerate(candidates):
-            times, poses = self.manoeuvre(z0, commands)
+            times, poses = run_of(commands)
             clearance_m = self._clearance(times, poses, data, None)
             if clearance_m < 0.0 or (best is not None and clearance_m <= best[1]):
                 continue
