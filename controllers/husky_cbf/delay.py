@@ -13,14 +13,14 @@ from __future__ import annotations
 
 from collections import deque
 
+import casadi as ca
 import numpy as np
 
 from controllers.husky_cbf.config import RobotResponse
-from controllers.husky_cbf.model import CONTROL_DIM, extended_step
+from controllers.husky_cbf.model import CONTROL_DIM, STATE_DIM, extended_step
 
 #: Samples of the sent-command stream per control step (the prediction's integration step, tau / 10).
 SUBSTEPS = 10
-_HELD = np.zeros(CONTROL_DIM)  # the command held over a sample: no acceleration
 
 
 class CommandPipe:
@@ -35,7 +35,8 @@ class CommandPipe:
         self._step_limit = (
             np.array([response.max_linear_accel_mps2, response.max_angular_accel_radps2]) * self._h
         )
-        self._sample_step = extended_step(self._h, response)
+        self._dead_time = _held_samples(extended_step(self._h, response), self._delay)
+        self._control_step = _held_samples(extended_step(self._h, response), SUBSTEPS)
         self.reset()
 
     def reset(self) -> None:
@@ -70,21 +71,35 @@ class CommandPipe:
     def predict_dead_time(self, pose: np.ndarray, omega_radps: float) -> tuple[np.ndarray, float]:
         """Pose (x m, y m, theta rad) and body yaw rate (rad/s) after the dead time, from `pose` and
         `omega_radps` now, under the commands already sent (call before `send`)."""
-        return self._integrate(pose, omega_radps, self._acting(self._delay, 0))
+        return self._integrate(self._dead_time, pose, omega_radps, self._acting(self._delay, 0))
 
     def predict_step(self, pose: np.ndarray, omega_radps: float) -> tuple[np.ndarray, float, float]:
         """Over the control step that starts now (call after `send`-ing its command): the pose
         and body yaw rate at its end, and the mean body speed over it (m/s)."""
         acting = self._acting(SUBSTEPS, SUBSTEPS)
-        end_pose, end_omega = self._integrate(pose, omega_radps, acting)
+        end_pose, end_omega = self._integrate(self._control_step, pose, omega_radps, acting)
         return end_pose, end_omega, float(np.mean([a[0] for a in acting]))
 
+    @staticmethod
     def _integrate(
-        self, pose: np.ndarray, omega_radps: float, acting: list[np.ndarray]
+        samples: ca.Function | None, pose: np.ndarray, omega_radps: float, acting: list[np.ndarray]
     ) -> tuple[np.ndarray, float]:
-        """The prediction model (model.py) with each sample's command held over the sample."""
+        """The prediction model (model.py) with each sample's command held over the sample, in one
+        call of `samples` (_held_samples of len(acting); None for no sample)."""
         z = np.array([*np.asarray(pose, dtype=float)[:3], 0.0, 0.0, omega_radps])
-        for command in acting:
-            z[3:5] = command
-            z = np.asarray(self._sample_step(z, _HELD), dtype=float).reshape(-1)
+        if samples is not None:
+            states = np.asarray(samples(z, np.column_stack(acting)), dtype=float)
+            z = states[:, -1]
         return z[:3], float(z[5])
+
+
+def _held_samples(sample_step: ca.Function, count: int) -> ca.Function | None:
+    """F(z, U) -> the states after each of `count` samples (STATE_DIM, count), the k-th sample
+    integrating `sample_step` from the state before it with its command set to U[:, k] and no
+    acceleration; None for count 0."""
+    if count == 0:
+        return None
+    z = ca.MX.sym("z", STATE_DIM)
+    u = ca.MX.sym("u", CONTROL_DIM)
+    held = sample_step(ca.vertcat(z[:3], u, z[5:]), ca.DM.zeros(CONTROL_DIM))
+    return ca.Function("held_sample", [z, u], [held]).mapaccum(count)
