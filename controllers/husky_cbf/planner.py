@@ -215,8 +215,8 @@ class Planner:
         on_grid = np.flatnonzero((rows_to > rows_from) & (cols_to > cols_from))
         for k in on_grid.tolist():
             (i0, i1), (j0, j1) = (rows_from[k], rows_to[k]), (cols_from[k], cols_to[k])
-            gx, gy = np.meshgrid(xs[j0:j1], ys[i0:i1])
-            occupied[i0:i1, j0:j1] |= (gx - cx[k]) ** 2 + (gy - cy[k]) ** 2 < r[k] * r[k]
+            dx2, dy2 = (xs[j0:j1] - cx[k]) ** 2, (ys[i0:i1, None] - cy[k]) ** 2
+            occupied[i0:i1, j0:j1] |= dx2 + dy2 < r[k] * r[k]
 
         def cells(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
             """(rows, columns) of the grid cells nearest to points (..., 2) (m), within the grid."""
