@@ -17,9 +17,7 @@ The policy, in order:
    - a set-point: APPROACH along the goal's line (SetPointApproach);
    - a trajectory: none.
 4. DETOUR: the planner's waypoint towards that target (or the goal), when the straight way is
-   blocked. Stepping aside, a mover blocks only where its body is (its sweep along its track would
-   block the way out of it), and the waypoint's heading is taken backwards if that turns the robot
-   less.
+   blocked; stepping aside, the waypoint's heading is taken backwards if that turns the robot less.
 5. The target of step 1 or 3 as it is (YIELD or APPROACH), else TRACK: the reference itself.
 """
 
@@ -135,13 +133,7 @@ class Arbiter:
         # 4. DETOUR towards that target, or the goal
         goal = s.goal if target is None else target.state
         detour = self.planner.waypoint(
-            s.pose[:2],
-            goal,
-            s.obstacles,
-            self.recovery.tabu_circles(s.t),
-            slow,
-            may_wait=not slow,
-            leaving_tracks=self.step_aside.active,
+            s.pose[:2], goal, s.obstacles, self.recovery.tabu_circles(s.t), slow, may_wait=not slow
         )
         if detour is not None:
             if self.step_aside.active:

@@ -102,16 +102,11 @@ class Planner:
         obstacles: Sequence[Obstacle],
         extra: np.ndarray | None = None,
         behind_movers: bool = False,
-        leaving_tracks: bool = False,
     ) -> np.ndarray:
         """(M, 3) circles [x, y, r] (m) that the planner avoids: the obstacles inflated and swept
-        (movers from the NMPC's first circle on if `behind_movers`; unswept if `leaving_tracks`)
-        and `extra` ones (recovery's tabu spots), neither over the robot."""
-        circles = (
-            self.movers.body_circles(obstacles, robot_xy)
-            if leaving_tracks
-            else self.movers.swept_circles(obstacles, robot_xy, ahead=behind_movers)
-        )
+        (movers from the NMPC's first circle on if `behind_movers`) and `extra` ones (recovery's
+        tabu spots), neither over the robot."""
+        circles = self.movers.swept_circles(obstacles, robot_xy, ahead=behind_movers)
         if extra is not None and len(extra):
             extra = np.array(extra, dtype=float).reshape(-1, 3)
             dist = np.hypot(extra[:, 0] - robot_xy[0], extra[:, 1] - robot_xy[1])
@@ -140,16 +135,13 @@ class Planner:
         extra: np.ndarray | None = None,
         behind_movers: bool = False,
         may_wait: bool = True,
-        leaving_tracks: bool = False,
     ) -> Target | None:
         """A waypoint toward goal [x, y, heading] (m, m, rad) if the straight way is blocked by
         the obstacles or the `extra` circles [x, y, r] (m); `behind_movers`: movers as the NMPC
         sees them ahead (MoverModel.lead_s), for a robot that waits for movers on purpose;
-        `may_wait`: whether the robot may wait for movers to clear a shorter way (_wait_for_movers);
-        `leaving_tracks`: the goal is a step out of the movers' tracks, so a mover blocks only
-        where its body is now (a sweep along its track would block the way out of it)."""
+        `may_wait`: whether the robot may wait for movers to clear a shorter way (_wait_for_movers)."""
         robot_xy = np.asarray(robot_xy, dtype=float)
-        circles = self.circles(robot_xy, obstacles, extra, behind_movers, leaving_tracks)
+        circles = self.circles(robot_xy, obstacles, extra, behind_movers)
         lead_s = self.movers.lead_s if behind_movers else 0.0
         margin = RELEASE_MARGIN_M if self.guided else 0.0
         if not segment_blocked(robot_xy, goal[:2], circles, margin):
@@ -163,7 +155,7 @@ class Planner:
             return None
         shorter = (
             self._wait_for_movers(robot_xy, goal, obstacles, extra, path, lead_s)
-            if may_wait and not static and not leaving_tracks
+            if may_wait and not static
             else None
         )
         path = path if shorter is None else shorter

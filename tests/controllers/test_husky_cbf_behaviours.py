@@ -105,24 +105,6 @@ def test_the_planner_follows_a_mover_through_a_gap_rather_than_turn_back_for_the
     assert way_round(0.06) < 1.0  # south: a mover at 6 cm/s blocks the gap for a minute
 
 
-def test_a_step_out_of_a_movers_track_is_not_detoured_along_it() -> None:
-    """The robot stands ahead of a walker coming down its track, in the walker's swept circles,
-    and steps aside across the track. Those circles, shrunk to exclude the robot and widened by
-    the release margin of a detour already under way, block every way out, so the planner sends
-    it round them, along the track; a step out of the tracks sees the walker's body only, and
-    goes straight across."""
-    walker = Obstacle(1.0, -0.3, 0.35, vy_mps=-0.47)
-    robot, aside = np.array([0.78, -2.25]), np.array([-0.39, -2.25, 0.0])
-
-    def waypoint(leaving_tracks: bool) -> object:
-        planner = _planner(growth_s=1.0, inflation_m=0.48, lead_s=1.3)
-        planner.guided = True  # a detour under way
-        return planner.waypoint(robot, aside, [walker], behind_movers=True, leaving_tracks=leaving_tracks)
-
-    assert waypoint(leaving_tracks=False) is not None
-    assert waypoint(leaving_tracks=True) is None
-
-
 def test_the_way_round_a_static_obstacle_dead_ahead_keeps_its_side_under_noise(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
