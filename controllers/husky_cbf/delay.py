@@ -35,8 +35,9 @@ class CommandPipe:
         self._step_limit = (
             np.array([response.max_linear_accel_mps2, response.max_angular_accel_radps2]) * self._h
         )
-        self._dead_time = _held_samples(extended_step(self._h, response), self._delay)
-        self._control_step = _held_samples(extended_step(self._h, response), SUBSTEPS)
+        sample_step = extended_step(self._h, response)
+        self._dead_time = _held_samples(sample_step, self._delay)
+        self._control_step = _held_samples(sample_step, SUBSTEPS)
         self.reset()
 
     def reset(self) -> None:
