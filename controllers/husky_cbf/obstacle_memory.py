@@ -77,16 +77,23 @@ class ObstacleMemory:
         measured = list(measured)
         if not self.remembers:
             return measured, np.zeros(len(measured))
-        kept = [r for r in self._kept if self._still_unseen(r, pose, measured, t_s)]
+        # the measured static obstacles, which hide what lies behind them
+        occluders = np.array([(o.x_m, o.y_m, o.radius_m) for o in measured if is_static(o)]).reshape(-1, 3)
+        kept = [r for r in self._kept if self._still_unseen(r, pose, measured, occluders, t_s)]
         self._kept = [Remembered(o, t_s) for o in measured] + kept
         ages = np.array([0.0] * len(measured) + [t_s - r.measured_s for r in kept])
         return measured + [r.now(t_s) for r in kept], ages
 
     def _still_unseen(
-        self, remembered: Remembered, pose: np.ndarray, measured: Sequence[Obstacle], t_s: float
+        self,
+        remembered: Remembered,
+        pose: np.ndarray,
+        measured: Sequence[Obstacle],
+        occluders: np.ndarray,
+        t_s: float,
     ) -> bool:
         """Whether a remembered obstacle is kept: not too old (a mover), not measured again, and
-        out of the sensor's sight."""
+        out of the sensor's sight (`occluders`: the measured static circles [x, y, r], m)."""
         moving = not is_static(remembered.obstacle)
         if moving and t_s - remembered.measured_s > MOVER_MEMORY_S:
             return False
@@ -96,12 +103,12 @@ class ObstacleMemory:
             off_m = math.hypot(seen.x_m - ob.x_m, seen.y_m - ob.y_m)
             if off_m < SAME_OBSTACLE_M + 0.5 * travel_m and is_static(seen) != moving:
                 return False  # measured again
-        return not self._in_sight(ob, pose, measured)
+        return not self._in_sight(ob, pose, occluders)
 
-    def _in_sight(self, ob: Obstacle, pose: np.ndarray, measured: Sequence[Obstacle]) -> bool:
+    def _in_sight(self, ob: Obstacle, pose: np.ndarray, occluders: np.ndarray) -> bool:
         """Whether the sensor at `pose` would surely see `ob`: wholly within its field of view (a
-        circle on its edge, or seen from a pose a latency old, may be missed), and no measured
-        static obstacle between them."""
+        circle on its edge, or seen from a pose a latency old, may be missed), and none of the
+        `occluders` (circles [x, y, r], m) between them."""
         dx, dy = ob.x_m - float(pose[0]), ob.y_m - float(pose[1])
         distance = math.hypot(dx, dy)
         if distance <= ob.radius_m:
@@ -110,5 +117,4 @@ class ObstacleMemory:
         half_width = math.asin(min(ob.radius_m / distance, 1.0))  # the circle's angular half width
         if abs(bearing) + half_width > self.half_fov_rad:
             return False
-        occluders = np.array([(o.x_m, o.y_m, o.radius_m) for o in measured if is_static(o)]).reshape(-1, 3)
         return not segment_blocked(np.asarray(pose[:2], dtype=float), np.array([ob.x_m, ob.y_m]), occluders)
