@@ -28,9 +28,9 @@ al.'s set of backups); the committed one if it is a way out (a way out taken goe
 one that keeps the most clearance. The same holds, over the shorter trap horizon (how soon a
 standing robot could leave a mover's track), where a cut passes but only one short of the whole
 plan: the robot is about to brake where that cut ends. A way out is a checked trajectory like any
-other. If none exists, the longest cut of the plan that clears the movers' tracks without their
-growth is sent (an evasion, which the NMPC's own mover constraints shaped); if none does, the
-braking manoeuvre as above.
+other. If none exists, the robot brakes as above all the same: no command is sent that no check
+passed, since a robot moving on an unchecked manoeuvre may be at fault for a contact, and a robot
+standing is not.
 
 Why this bounds the robot's fault. A robot that stands cannot be at fault for a contact (passive
 motion safety: Macek et al. 2009; Bouraine, Fraichard and Salhi 2012), and every committed
@@ -41,9 +41,7 @@ new velocity at most a tau off the old, which is exactly what the old circle's l
 covers. So while the assumptions hold, a checked trajectory exists every step. What breaks them: a
 drive that brakes slower than its limits say (a heavy payload on low friction), a mover that
 changes velocity faster than the bound, velocity estimates off by more than the bound allows, and
-an obstacle first seen inside the stopping distance (the sensing model's occlusion and range);
-and an evasion from a mover that would reach the standing robot, which is checked against the
-movers' tracks only.
+an obstacle first seen inside the stopping distance (the sensing model's occlusion and range).
 """
 
 from __future__ import annotations
@@ -74,9 +72,8 @@ EVASION_HOLDS_S = (0.3, 0.6, 1.0)
 @dataclass(frozen=True)
 class FilterVerdict:
     """The command to send; whether the filter intervened (the command is not the plan's first:
-    it is the committed trajectory's, a braking or evasive backup's, or an evasion's checked
-    against the movers' ungrown tracks only); and the smallest clearance (m) of the trajectory it
-    begins, as checked (negative: a predicted contact)."""
+    it is the committed trajectory's, or a braking or evasive backup's); and the smallest
+    clearance (m) of the trajectory it begins, as checked (negative: a predicted contact)."""
 
     command: np.ndarray
     intervened: bool
@@ -214,10 +211,10 @@ class SafetyFilter:
         plan and ends where a mover reaches the standing robot within the trap horizon and a way
         out exists (module docstring); else the committed trajectory's next command if it still
         passes, else the braking manoeuvre that keeps the most clearance; where that fallback would
-        stand in a mover's way within the threat horizon, a way out if one exists, else the
-        longest cut of the plan that clears the movers' tracks without their growth. A plan that
-        is not finite has no cut that passes. `ages_s`: how long before now each obstacle was
-        measured (obstacle_memory.py; default all now): a mover's circle grows over its age too."""
+        stand in a mover's way within the threat horizon, a way out if one exists (else that
+        fallback all the same). A plan that is not finite has no cut that passes. `ages_s`: how
+        long before now each obstacle was measured (obstacle_memory.py; default all now): a mover's
+        circle grows over its age too."""
         plan = np.asarray(plan, dtype=float).reshape(-1, 2)
         if not (np.all(np.isfinite(plan)) and np.all(np.isfinite(z0))):
             plan = np.zeros((0, 2))
@@ -231,19 +228,11 @@ class SafetyFilter:
                 runs[key] = self.manoeuvre(z0, commands)
             return runs[key]
 
-        def longest_clear_cut(accel_bound_mps2: float) -> tuple[int, float] | None:
-            """The longest cut k whose manoeuvre clears every obstacle with movers grown at
-            accel_bound_mps2, and its clearance (m); None when no cut does."""
-            for k in range(len(plan), 0, -1):
-                clearance_m = self._clearance(*run_of(plan[:k]), data, accel_bound_mps2)
-                if clearance_m >= 0.0:
-                    return k, clearance_m
-            return None
-
-        cut = longest_clear_cut(self._accel_bound)
-        if cut is not None:
-            k, clearance_m = cut
+        for k in range(len(plan), 0, -1):  # the longest cut that passes the check
             times, poses = run_of(plan[:k])
+            clearance_m = self._clearance(times, poses, data, None)
+            if clearance_m < 0.0:
+                continue
             # the plan is being cut: the robot is about to brake where its cut ends
             if k < len(plan) and self._hit_standing(times[-1], poses[-1], data, self._trap_s):
                 # the rest of a way out already taken goes on, if it still is one: no dithering
@@ -267,11 +256,6 @@ class SafetyFilter:
             )
             if way_out is not None:
                 return self._commit(*way_out)
-            cut = longest_clear_cut(0.0)
-            if cut is not None:
-                k, evading_m = cut
-                self._committed = plan[1:k].copy()
-                return FilterVerdict(plan[0].copy(), True, evading_m)
         command = chosen[0].copy() if len(chosen) else np.zeros(2)
         self._committed = chosen[1:].copy()
         return FilterVerdict(command, True, clearance_m)

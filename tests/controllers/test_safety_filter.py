@@ -135,20 +135,33 @@ def test_a_longer_cut_passes_only_if_its_whole_manoeuvre_clears() -> None:
     assert 1 < k < 10 and len(f._committed) == k - 1
 
 
-def test_where_standing_is_no_refuge_a_cut_clear_of_the_movers_tracks_is_sent() -> None:
+def test_where_standing_is_no_refuge_a_checked_way_out_is_taken_and_else_the_robot_brakes() -> None:
+    """A standing robot with a post behind it, so that no cut of its reversing plan passes, and a
+    walker coming down on it from the north: braking stands in the walker's way. A dash forwards
+    out of the way is taken where it passes the full check; where no moving manoeuvre passes (a
+    bound so large that every mover's circle swallows it), the robot brakes all the same, even
+    against a plan that clears the walker's track as measured: an unchecked command is never sent."""
     standing = np.zeros(6)
-    head_on = [Obstacle(1.2, 0.0, 0.3, -0.6, 0.0)]  # walks at the robot
     reverse = np.tile([-1.0, 0.0], (5, 1))
-    # a bound so large that no moving manoeuvre clears the grown circle: braking is committed
-    braking = _filter(accel_bound=50.0).filter(standing, reverse, head_on)
+    post = Obstacle(-(0.33 + 0.38 + 0.3 + 0.005), 0.0, 0.3)
+    walker = Obstacle(-0.2, 3.0, 0.3, 0.0, -1.0)
+    f = _filter(accel_bound=0.0, threat_s=6.0)
+    evading = f.filter(standing, reverse, [post, walker])
+    assert evading.intervened and evading.clearance_m >= 0.0 and evading.command[0] > 0.0
+    times, poses = f.manoeuvre(standing, np.vstack([evading.command, f._committed]))
+    assert f.clearance(times, poses, [post, walker]) >= 0.0
+    assert not f._hit_standing(times[-1], poses[-1], sf_rows([post, walker]), 6.0)
+    # nearer, with that bound: no cut of a creeping plan clears the walker's grown circle, though
+    # every cut clears its track as measured; the plan is not sent
+    creeping, nearer = np.tile([0.3, 0.0], (5, 1)), Obstacle(-0.2, 1.6, 0.3, 0.0, -1.0)
+    strict = _filter(accel_bound=50.0, threat_s=6.0)
+    cut = strict.manoeuvre(standing, creeping[:1])
+    assert strict.clearance(*cut, [post, nearer]) < 0.0 <= strict.clearance(*cut, [post, nearer], 0.0)
+    braking = strict.filter(standing, creeping, [post, nearer])
     assert braking.intervened and np.array_equal(braking.command, np.zeros(2))
-    # with a threat horizon over which the walker reaches the standing robot, the evasion goes
-    evading = _filter(accel_bound=50.0, threat_s=6.0).filter(standing, reverse, head_on)
-    assert evading.intervened and np.array_equal(evading.command, reverse[0])  # counted, not checked
-    # a walker whose track passes beside the standing robot is no threat: the robot brakes
-    passing = [Obstacle(1.2, 1.2, 0.3, -0.6, 0.0)]
-    stays = _filter(accel_bound=50.0, threat_s=6.0).filter(standing, reverse, passing)
-    assert stays.intervened and np.array_equal(stays.command, np.zeros(2))
+    # without the walker, braking is the refuge it always is
+    alone = _filter(accel_bound=0.0, threat_s=6.0).filter(standing, reverse, [post])
+    assert alone.intervened and np.array_equal(alone.command, np.zeros(2))
 
 
 def test_what_cannot_be_checked_does_not_pass() -> None:
