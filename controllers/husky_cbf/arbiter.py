@@ -7,8 +7,8 @@ The policy, in order:
    first. Stepping aside, or any kind of reference but a slow trajectory, ends waiting beside the
    point (WaitBeside is reset).
 2. RECOVER: recovery's target wins outright when it has one. Never on a slow trajectory (the robot
-   waits for movers there on purpose); paused (stalls forgotten) while stepping aside, and on a
-   trajectory while the planner detours (the way round already is the way out).
+   waits for movers there on purpose); paused (stalls forgotten) while stepping aside. A detour is
+   no exception: a robot that makes no progress along the planner's way round is stalled too.
 3. The behaviour's target, unless stepping aside:
    - a slow trajectory: YIELD, wait beside the point for a mover on course to it (the point
      approach then leads to the waiting spot); else APPROACH the point (PointApproach), and, at
@@ -146,7 +146,7 @@ class Arbiter:
         """Recovery's target where the policy lets it act (step 2), else None."""
         if not self.recovery.enabled or s.kind is ReferenceKind.SLOW_TRAJECTORY:
             return None
-        if stepping_aside or (s.kind is ReferenceKind.TRAJECTORY and self.planner.guided):
+        if stepping_aside:
             self.recovery.pause()
             return None
         return self.recovery.propose(s)
