@@ -133,7 +133,7 @@ class Arbiter:
         # 4. DETOUR towards that target, or the goal
         goal = s.goal if target is None else target.state
         detour = self.planner.waypoint(
-            s.pose[:2], goal, s.obstacles, self.recovery.tabu_circles(s.t), slow, may_wait=not slow
+            s.pose[:2], goal, s.obstacles, self.recovery.tabu_circles(s.t), may_wait=not slow
         )
         if detour is not None:
             if self.step_aside.active:

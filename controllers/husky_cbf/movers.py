@@ -10,9 +10,10 @@ the planner's circles (`MoverModel.swept_circles`) and the yielding behaviours (
   track from the mover's predicted position and widened by half the sweep's length.
 - Its circle grows with its predicted travel (`margin_per_m` per metre): its velocity is an
   estimate.
-- The planner sees each mover as the NMPC does at the horizon's middle (`growth_s`), swept over
+- The planner sees each mover as the NMPC's first circle: from `lead_s` along its track, as wide
+  as the NMPC sees it at the horizon's middle (`growth_s`), and swept on over
   `PLANNER_SWEEP_FACTOR` times the NMPC's sweep, so that a path does not lead through a gap the
-  NMPC holds closed.
+  NMPC holds closed, nor is kept from the track the mover has left behind it.
 
 An obstacle slower than STATIC_SPEED_MPS counts as static for the decisions that tell movers from
 the static layer (the planner's hysteresis and waits, yielding); the circles sweep any obstacle
@@ -156,13 +157,10 @@ class MoverModel:
         not swept (inflated_circles)."""
         return inflated_circles(obstacles, self.inflation_m, 0.0, robot_xy)
 
-    def swept_circles(
-        self, obstacles: Sequence[Obstacle], robot_xy: np.ndarray, ahead: bool = False
-    ) -> np.ndarray:
+    def swept_circles(self, obstacles: Sequence[Obstacle], robot_xy: np.ndarray) -> np.ndarray:
         """(M, 3) circles [x, y, r] (m) the planner avoids: obstacles inflated by inflation_m, a
-        mover grown by growth_m and swept over planner_sweep_s, from now, or if `ahead` from
-        lead_s on, where the NMPC's first circle is (inflated_circles)."""
-        lead_s = self.lead_s if ahead else 0.0
+        mover grown by growth_m and swept over planner_sweep_s from lead_s on, where the NMPC's
+        first circle is (inflated_circles)."""
         return inflated_circles(
-            obstacles, self.inflation_m, self.planner_sweep_s, robot_xy, self.growth_s, lead_s
+            obstacles, self.inflation_m, self.planner_sweep_s, robot_xy, self.growth_s, self.lead_s
         )

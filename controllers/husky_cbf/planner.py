@@ -5,7 +5,8 @@ obstacles, a mover coming head-on) stops at the obstacle: its cost only falls by
 The planner detects that case and hands the NMPC a nearer waypoint instead of the goal:
 
 - obstacles are inflated by the robot's disc radius plus margin; a mover is swept along its track
-  (movers.MoverModel.swept_circles), so a path is not planned through where it will be;
+  from where the NMPC's first circle of it is (movers.MoverModel.swept_circles), so a path is not
+  planned through where it will be, nor kept from where it was;
 - blocked: the segment from the robot to the goal crosses an inflated obstacle (a robot already
   detouring needs RELEASE_MARGIN_M more to stop, so it does not flicker in and out);
 - then a shortest path on a cost grid (cells near obstacles cost more, so the path keeps its
@@ -101,12 +102,11 @@ class Planner:
         robot_xy: np.ndarray,
         obstacles: Sequence[Obstacle],
         extra: np.ndarray | None = None,
-        behind_movers: bool = False,
     ) -> np.ndarray:
         """(M, 3) circles [x, y, r] (m) that the planner avoids: the obstacles inflated and swept
-        (movers from the NMPC's first circle on if `behind_movers`) and `extra` ones (recovery's
-        tabu spots), neither over the robot."""
-        circles = self.movers.swept_circles(obstacles, robot_xy, ahead=behind_movers)
+        (MoverModel.swept_circles) and `extra` ones (recovery's tabu spots), neither over the
+        robot."""
+        circles = self.movers.swept_circles(obstacles, robot_xy)
         if extra is not None and len(extra):
             extra = np.array(extra, dtype=float).reshape(-1, 3)
             dist = np.hypot(extra[:, 0] - robot_xy[0], extra[:, 1] - robot_xy[1])
@@ -133,16 +133,13 @@ class Planner:
         goal: np.ndarray,
         obstacles: Sequence[Obstacle],
         extra: np.ndarray | None = None,
-        behind_movers: bool = False,
         may_wait: bool = True,
     ) -> Target | None:
         """A waypoint toward goal [x, y, heading] (m, m, rad) if the straight way is blocked by
-        the obstacles or the `extra` circles [x, y, r] (m); `behind_movers`: movers as the NMPC
-        sees them ahead (MoverModel.lead_s), for a robot that waits for movers on purpose;
-        `may_wait`: whether the robot may wait for movers to clear a shorter way (_wait_for_movers)."""
+        the obstacles or the `extra` circles [x, y, r] (m); `may_wait`: whether the robot may wait
+        for movers to clear a shorter way (_wait_for_movers)."""
         robot_xy = np.asarray(robot_xy, dtype=float)
-        circles = self.circles(robot_xy, obstacles, extra, behind_movers)
-        lead_s = self.movers.lead_s if behind_movers else 0.0
+        circles = self.circles(robot_xy, obstacles, extra)
         margin = RELEASE_MARGIN_M if self.guided else 0.0
         if not segment_blocked(robot_xy, goal[:2], circles, margin):
             self.guided, self.path = False, None
@@ -154,9 +151,7 @@ class Planner:
             self.guided, self.path = False, None
             return None
         shorter = (
-            self._wait_for_movers(robot_xy, goal, obstacles, extra, path, lead_s)
-            if may_wait and not static
-            else None
+            self._wait_for_movers(robot_xy, goal, obstacles, extra, path) if may_wait and not static else None
         )
         path = path if shorter is None else shorter
         self.guided, self.path = True, path
@@ -169,7 +164,6 @@ class Planner:
         obstacles: Sequence[Obstacle],
         extra: np.ndarray | None,
         path: np.ndarray,
-        lead_s: float,
     ) -> np.ndarray | None:
         """The shortest way round the static obstacles alone ((K, 2), m) instead of `path`, the way
         round the movers too, if a robot driving it at DETOUR_SPEED_MPS, now or after a wait
@@ -187,11 +181,11 @@ class Planner:
         detour_s = (arc_lengths(path)[-1] - along[-1]) / DETOUR_SPEED_MPS
         arrival_s = along / DETOUR_SPEED_MPS
         # each mover's sweep as the planner inflates it now (its first circle, if it holds the
-        # robot, shrunk to exclude it), carried along the track to each arrival below
+        # robot, shrunk to exclude it), carried along its track to each arrival below
         sweeps = [(self.movers.swept_circles([m], robot_xy), m) for m in movers]
         # a mover's circles cover planner_sweep_s of its track: waits that far apart overlap halfway
         for wait_s in np.arange(0.0, detour_s, 0.5 * self.movers.planner_sweep_s):
-            times_s = lead_s + wait_s + arrival_s
+            times_s = wait_s + arrival_s
             if not any(_meets(static_path, times_s, circles, mover) for circles, mover in sweeps):
                 return static_path
         return None

@@ -129,15 +129,18 @@ def test_the_way_round_a_static_obstacle_dead_ahead_keeps_its_side_under_noise(
     assert len(set(sides())) == 2  # flips with the noise
 
 
-def test_a_waiting_robot_sees_a_mover_that_passed_its_reference_as_the_nmpc_does() -> None:
-    """A mover 1 m past the reference, going away at 0.5 m/s: the planner's circles centred on the
-    mover now still cover the reference; for a robot waiting on a slow trajectory they start where
-    the NMPC's first circle is (the mover model's lead) and the way back is clear."""
+def test_the_planner_sees_a_mover_as_the_nmpc_does_from_its_first_circle_on() -> None:
+    """A mover 1 m past the reference, going away at 0.5 m/s: circles centred on the mover now,
+    grown as wide as the NMPC sees it, would still cover the reference; the planner's start where
+    the NMPC's first circle is (the mover model's lead), so the way back is clear. Coming the other
+    way, the same mover holds the way closed."""
     planner = _planner(growth_s=0.96, lead_s=1.09)
-    mover = [Obstacle(1.0, 0.0, 0.3, vx_mps=0.5)]
     robot, reference = np.array([0.0, -2.0]), np.array([0.0, 0.0, math.pi / 2])
-    assert planner.waypoint(robot, reference, mover) is not None  # held closed: a detour
-    assert planner.waypoint(robot, reference, mover, behind_movers=True) is None  # straight back
+    going = Obstacle(1.0, 0.0, 0.3, vx_mps=0.5)
+    assert _planner(growth_s=0.96).waypoint(robot, reference, [going]) is not None  # from now: closed
+    assert planner.waypoint(robot, reference, [going]) is None  # straight back
+    coming = Obstacle(1.0, 0.0, 0.3, vx_mps=-0.5)
+    assert planner.waypoint(robot, reference, [coming]) is not None  # held closed: a detour
 
 
 def test_the_planner_sweeps_a_mover_over_its_named_multiple_of_the_nmpc_sweep() -> None:
