@@ -1,6 +1,6 @@
 """husky-cbf's safety filter in the closed loop: real PyBullet, real solver, a generated layout.
 
-The layout is a generated crossing (crossing_walkers, seed 1, layout 3, N = 5) in which husky-cbf
+The layout is a generated crossing (crossing_walkers, seed 1, layout 4, N = 5) in which husky-cbf
 without its filter drives into a walker. The test is that the filter turns a contact while moving
 into none while moving, and that the summary counts its interventions; if the controller or the
 family changes so that the unfiltered run no longer collides, pick another layout of the kind."""
@@ -18,7 +18,7 @@ pytestmark = pytest.mark.physics
 
 
 def _run(safety_filter: bool) -> dict[str, object]:
-    data = yaml.safe_load(draw_layout("crossing_walkers", 1, 3).text)
+    data = yaml.safe_load(draw_layout("crossing_walkers", 1, 4).text)
     data["controller"] = {**data["controller"], "husky_cbf": {"safety_filter": safety_filter}}
     return run_scenario(scenario_from_data(data), "husky-cbf", horizon=5).as_dict()
 
