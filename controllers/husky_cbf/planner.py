@@ -180,8 +180,9 @@ class Planner:
         along = arc_lengths(static_path)
         detour_s = (arc_lengths(path)[-1] - along[-1]) / DETOUR_SPEED_MPS
         arrival_s = along / DETOUR_SPEED_MPS
-        # each mover's sweep as the planner inflates it now (its first circle, if it holds the
-        # robot, shrunk to exclude it), carried along its track to each arrival below
+        # each mover's sweep as the planner draws it this step (from the mover model's lead on; a
+        # circle that holds the robot shrunk to exclude it), carried along its track to each
+        # arrival below
         sweeps = [(self.movers.swept_circles([m], robot_xy), m) for m in movers]
         # a mover's circles cover planner_sweep_s of its track: waits that far apart overlap halfway
         for wait_s in np.arange(0.0, detour_s, 0.5 * self.movers.planner_sweep_s):
