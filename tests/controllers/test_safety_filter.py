@@ -159,9 +159,10 @@ def test_where_standing_is_no_refuge_a_checked_way_out_is_taken_and_else_the_rob
     assert strict.clearance(*cut, [post, nearer]) < 0.0 <= strict.clearance(*cut, [post, nearer], 0.0)
     braking = strict.filter(standing, creeping, [post, nearer])
     assert braking.intervened and np.array_equal(braking.command, np.zeros(2))
-    # without the walker, braking is the refuge it always is
-    alone = _filter(accel_bound=0.0, threat_s=6.0).filter(standing, reverse, [post])
-    assert alone.intervened and np.array_equal(alone.command, np.zeros(2))
+    # a walker whose track passes beside the standing robot is no threat: no dash, the robot brakes
+    passing = Obstacle(1.2, 1.2, 0.3, -0.6, 0.0)
+    stays = _filter(accel_bound=0.0, threat_s=6.0).filter(standing, reverse, [post, passing])
+    assert stays.intervened and np.array_equal(stays.command, np.zeros(2))
 
 
 def test_what_cannot_be_checked_does_not_pass() -> None:
