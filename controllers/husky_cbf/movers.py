@@ -15,6 +15,9 @@ the planner's circles (`MoverModel.swept_circles`) and the yielding behaviours (
   `PLANNER_SWEEP_FACTOR` times the NMPC's sweep, so that a path does not lead through a gap the
   NMPC holds closed, nor is kept from the track the mover has left behind it.
 
+A mover's track ends where it meets the static layer (`free_run_m`): it turns before then, where
+no constant-velocity prediction says.
+
 An obstacle slower than STATIC_SPEED_MPS counts as static for the decisions that tell movers from
 the static layer (the planner's hysteresis and waits, yielding); the circles sweep any obstacle
 that moves at all.
@@ -164,3 +167,26 @@ class MoverModel:
         return inflated_circles(
             obstacles, self.inflation_m, self.planner_sweep_s, robot_xy, self.growth_s, self.lead_s
         )
+
+
+def free_run_m(data: np.ndarray) -> np.ndarray:
+    """(M,) how far (m) each mover of `data` (rows [x, y, vx, vy, r, ...]) runs along its
+    constant-velocity track before its disc meets a static obstacle's (inf: it meets none, or it
+    stands): a walker does not walk through a wall, so it turns before it, and no
+    constant-velocity prediction says where. An obstacle it already touches is not in its way (it
+    passes beside it)."""
+    speed = np.hypot(data[:, 2], data[:, 3])
+    moving, still = speed > STATIC_SPEED_MPS, speed <= STATIC_SPEED_MPS
+    out = np.full(len(data), np.inf)
+    if not np.any(moving) or not np.any(still):
+        return out
+    movers, posts = data[moving], data[still]
+    heading = movers[:, 2:4] / speed[moving, None]  # (A, 2)
+    offset = movers[:, None, 0:2] - posts[None, :, 0:2]  # (A, B, 2)
+    reach = movers[:, None, 4] + posts[None, :, 4]  # (A, B)
+    along = np.einsum("abk,ak->ab", offset, heading)
+    excess = np.einsum("abk,abk->ab", offset, offset) - reach**2
+    disc = along**2 - excess
+    hit = (excess > 0.0) & (along < 0.0) & (disc >= 0.0)
+    out[moving] = np.min(np.where(hit, -along - np.sqrt(np.where(hit, disc, 0.0)), np.inf), axis=1)
+    return out

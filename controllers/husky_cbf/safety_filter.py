@@ -13,10 +13,13 @@ time since it was measured (`mover_accel_bound_mps2`: a walker that speeds up, s
 within that bound stays inside its circle).
 
 The choice, each step. Candidates are the NMPC's plan cut after k of its commands, then braking,
-for k = N down to 1; the first that passes the check becomes the committed trajectory. If none
-does, the committed trajectory is kept, one command further on. If that fails too (an assumption
-broke), the filter sends whichever braking manoeuvre keeps the most clearance: the committed
-trajectory, or braking now, straight or along the arc now commanded.
+for k = N down to 1; the first that passes the check and ends out of every mover's way (below)
+becomes the committed trajectory; if each that passes ends in a way, a way out (below), else the
+one of them, or braking now, whose stand a mover reaches last (the most time for the next plan to
+find a way out, rather than a plan that drives deeper into a mover's way). If none passes, the
+committed trajectory is kept, one command further on. If that fails too (an assumption broke),
+the filter sends whichever braking manoeuvre keeps the most clearance: the committed trajectory,
+or braking now, straight or along the arc now commanded.
 
 Standing in a mover's way. Braking is no refuge where a mover's constant-velocity track reaches
 the robot standing within the threat horizon (husky-cbf's yielding horizon: the horizon over
@@ -26,8 +29,10 @@ the committed trajectory, braking, and the evasive backups (a command at the dri
 forwards or backwards, straight or on an arc, held for a few periods, then braking: Gurriet et
 al.'s set of backups); the committed one if it is a way out (a way out taken goes on), else the
 one that keeps the most clearance. The same holds, over the shorter trap horizon (how soon a
-standing robot could leave a mover's track), where a cut passes but only one short of the whole
-plan: the robot is about to brake where that cut ends. A way out is a checked trajectory like any
+standing robot could leave a mover's track), where every cut that passes ends in a mover's way.
+A mover whose track meets a static obstacle within the threat horizon turns before it, and no
+prediction says where: its track counts only where a cut passes but one short of the whole plan
+(the robot is about to brake where that cut ends). A way out is a checked trajectory like any
 other. If none exists, the robot brakes as above all the same: no command is sent that no check
 passed, since a robot moving on an unchecked manoeuvre may be at fault for a contact, and a robot
 standing is not.
@@ -53,6 +58,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from controllers.husky_cbf.config import RobotResponse
+from controllers.husky_cbf.movers import free_run_m
 from controllers.obstacles import Obstacle
 
 #: Integration step of a checked manoeuvre (s): a disc moves at most 2 cm between checks at 1 m/s.
@@ -207,9 +213,10 @@ class SafetyFilter:
     ) -> FilterVerdict:
         """The command to send now, given the NMPC's planned commands `plan` ((k, 2) [v, omega]
         per control period, one (2,) command, or none): its first, if a cut of the plan passes the
-        check (the longest becomes the committed trajectory), unless that cut is short of the whole
-        plan and ends where a mover reaches the standing robot within the trap horizon and a way
-        out exists (module docstring); else the committed trajectory's next command if it still
+        check (the longest that ends out of every mover's way within the trap horizon becomes the
+        committed trajectory); where each passing cut ends in a way, a way out if one exists, else
+        the passing cut or braking now whose stand a mover reaches last (module docstring: which
+        movers count); if no cut passes, the committed trajectory's next command if it still
         passes, else the braking manoeuvre that keeps the most clearance; where that fallback would
         stand in a mover's way within the threat horizon, a way out if one exists (else that
         fallback all the same). A plan that is not finite has no cut that passes. `ages_s`: how
@@ -228,17 +235,46 @@ class SafetyFilter:
                 runs[key] = self.manoeuvre(z0, commands)
             return runs[key]
 
-        for k in range(len(plan), 0, -1):  # the longest cut that passes the check
+        # movers whose constant-velocity track says where they will be over the threat horizon:
+        # one that meets the static layer sooner turns before it, and no prediction says where
+        credible = data[free_run_m(data) > np.hypot(data[:, 2], data[:, 3]) * self._threat_s]
+        # of the cuts that pass, the one that movers reach last from now (s), the longest of those
+        passing: tuple[float, int, float] | None = None  # (reached, k, clearance)
+        searched = False  # whether the way out was looked for (and none found) this step
+        longest = True  # the cut at hand is the longest that passes
+        for k in range(len(plan), 0, -1):  # the longest passing cut that stands out of the way
             times, poses = run_of(plan[:k])
             clearance_m = self._clearance(times, poses, data, None)
             if clearance_m < 0.0:
                 continue
             # the plan is being cut: the robot is about to brake where its cut ends
-            if k < len(plan) and self._hit_standing(times[-1], poses[-1], data, self._trap_s):
+            if longest and k < len(plan) and self._hit_standing(times[-1], poses[-1], data, self._trap_s):
                 # the rest of a way out already taken goes on, if it still is one: no dithering
                 way_out = self._way_out(run_of, data, [self._committed, *self._evasions], self._trap_s)
                 if way_out is not None:
                     return self._commit(*way_out)
+                searched = True
+            longest = False
+            reached_s = times[-1] + self._reached_s(times[-1], poses[-1], credible, self._trap_s)
+            if math.isfinite(reached_s):
+                if passing is None or reached_s > passing[0]:
+                    passing = (reached_s, k, clearance_m)
+                continue
+            self._committed = plan[1:k].copy()
+            return FilterVerdict(plan[0].copy(), False, clearance_m)
+        if passing is not None:
+            # every passing cut stands in a credible mover's way: a way out, if one exists
+            if not searched:
+                way_out = self._way_out(run_of, data, [self._committed, *self._evasions], self._trap_s)
+                if way_out is not None:
+                    return self._commit(*way_out)
+            # no way out: braking now, if movers reach the robot later where it would stand
+            times, poses = run_of(np.zeros((0, 2)))
+            clearance_m = self._clearance(times, poses, data, None)
+            reached_s = times[-1] + self._reached_s(times[-1], poses[-1], credible, self._trap_s)
+            if clearance_m >= 0.0 and reached_s > passing[0]:
+                return self._commit(np.zeros((0, 2)), clearance_m)
+            _, k, clearance_m = passing
             self._committed = plan[1:k].copy()
             return FilterVerdict(plan[0].copy(), False, clearance_m)
         chosen, run = self._committed, run_of(self._committed)
@@ -291,18 +327,30 @@ class SafetyFilter:
         return best
 
     def _hit_standing(self, stand_s: float, pose: np.ndarray, data: np.ndarray, horizon_s: float) -> bool:
-        """Whether a mover (a row of `data` with a velocity, _obstacle_rows) at constant velocity,
-        not grown, reaches a body disc of a robot standing at `pose` from `stand_s` (s from z0)
-        within `horizon_s`."""
+        """Whether a mover reaches the robot standing at `pose` from `stand_s` within `horizon_s`
+        (_reached_s)."""
+        return math.isfinite(self._reached_s(stand_s, pose, data, horizon_s))
+
+    def _reached_s(self, stand_s: float, pose: np.ndarray, data: np.ndarray, horizon_s: float) -> float:
+        """How soon (s) after `stand_s` (s from z0) a mover (a row of `data` with a velocity,
+        _obstacle_rows) at constant velocity, not grown, first reaches a body disc of a robot
+        standing at `pose`, within `horizon_s`; inf if none does."""
         data = data[(data[:, 2] != 0.0) | (data[:, 3] != 0.0)]
         if len(data) == 0 or horizon_s <= 0.0:
-            return False
-        since = self._lead_s + stand_s + np.arange(0.0, horizon_s + STEP_S, 5 * STEP_S)
-        centres = data[None, :, 0:2] + data[None, :, 2:4] * since[:, None, None]  # (T, M, 2)
+            return math.inf
         heading = np.array([math.cos(pose[2]), math.sin(pose[2])])
         discs = pose[None, :2] + self._offsets[:, None] * heading[None, :]  # (D, 2)
-        gaps = np.linalg.norm(centres[:, :, None, :] - discs[None, None, :, :], axis=3)  # (T, M, D)
-        return bool(np.any(gaps < data[None, :, 4, None] + self._disc_radius))
+        # each mover's centre relative to each disc at the stand, and when their gap closes
+        rel = data[:, None, 0:2] + data[:, None, 2:4] * (self._lead_s + stand_s) - discs[None, :, :]
+        reach = data[:, 4, None] + self._disc_radius  # (M, 1)
+        a = np.sum(data[:, 2:4] ** 2, axis=1)[:, None]  # (M, 1)
+        b = np.einsum("mdk,mk->md", rel, data[:, 2:4])  # half the linear coefficient, (M, D)
+        c = np.sum(rel**2, axis=2) - reach**2  # (M, D)
+        root = b**2 - a * c
+        first = np.where(root >= 0.0, (-b - np.sqrt(np.maximum(root, 0.0))) / a, math.inf)
+        first = np.where(c <= 0.0, 0.0, np.where(first >= 0.0, first, math.inf))
+        soonest = float(np.min(first))
+        return soonest if soonest <= horizon_s else math.inf
 
 
 def _obstacle_rows(obstacles: Sequence[Obstacle], ages_s: Sequence[float] | None = None) -> np.ndarray:

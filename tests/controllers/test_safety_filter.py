@@ -181,14 +181,14 @@ def test_a_plan_that_would_stand_in_a_walker_s_way_gives_way_to_a_checked_evasiv
     cut short of the post (its longest passing cut ends before its last command), and that cut
     ends standing where the walker arrives within the trap horizon. With a trap horizon the filter
     commits an evasive backup that passes the same full check and ends out of the walker's way;
-    without one, or with a plan that passes whole, the plan is kept."""
+    without one the plan is kept. A plan that passes whole but stands in the walker's way gives way
+    too, unless the walker's track meets a static obstacle within the threat horizon: it turns
+    before then, and its track does not say where it will go."""
     creeping = np.tile([0.2, 0.0], (30, 1))
     post = Obstacle(1.5, 0.0, 0.3)
     walker = Obstacle(0.6, 3.5, 0.3, 0.0, -1.0)  # crosses the way just after the cut's stand
     kept = _filter(accel_bound=0.0).filter(_moving_at(0.2), creeping, [post, walker])
     assert not kept.intervened and np.array_equal(kept.command, creeping[0])
-    whole = _filter(accel_bound=0.0, trap_s=3.0).filter(_moving_at(0.2), creeping[:5], [post, walker])
-    assert not whole.intervened  # the whole plan passes: the NMPC is not about to brake
     f = _filter(accel_bound=0.0, trap_s=3.0)
     evading = f.filter(_moving_at(0.2), creeping, [post, walker])
     assert evading.intervened and evading.clearance_m >= 0.0
@@ -196,6 +196,12 @@ def test_a_plan_that_would_stand_in_a_walker_s_way_gives_way_to_a_checked_evasiv
     times, poses = f.manoeuvre(_moving_at(0.2), np.vstack([evading.command, f._committed]))
     assert f.clearance(times, poses, [post, walker], 0.0) >= 0.0
     assert not f._hit_standing(times[-1], poses[-1], sf_rows([post, walker]), 3.0)
+    # the whole plan passes, and ends standing in the walker's way
+    whole = _filter(accel_bound=0.0, threat_s=6.0, trap_s=3.0)
+    assert whole.filter(_moving_at(0.2), creeping[:5], [post, walker]).intervened
+    # ... where a wall stands across the walker's track, 1.1 m on, it will turn: the plan goes on
+    wall = Obstacle(0.6, 1.8, 0.3)
+    assert not whole.filter(_moving_at(0.2), creeping[:5], [post, walker, wall]).intervened
 
 
 def test_a_remembered_mover_s_circle_grows_over_its_age() -> None:
@@ -205,3 +211,24 @@ def test_a_remembered_mover_s_circle_grows_over_its_age() -> None:
     beside = [Obstacle(1.0, 1.6, 0.3, 0.0, 1e-3)]
     assert not _filter(accel_bound=0.5).filter(_moving_at(0.5), command, beside, [0.0]).intervened
     assert _filter(accel_bound=0.5).filter(_moving_at(0.5), command, beside, [2.0]).intervened
+
+
+def test_with_no_way_out_of_a_walker_s_way_the_robot_stands_where_it_is_reached_last() -> None:
+    """A standing robot, a walker coming down just behind it, and no evasive backups: every cut of
+    a plan that reverses towards the walker's track stands in its way, sooner the further it goes,
+    and no way out exists. The robot brakes where it stands, where the walker reaches it last,
+    rather than back into its way; a plan that drives away from the track goes on."""
+    no_evasions = 0.0
+    f = SafetyFilter(RESPONSE, 0.1, DISCS, 0.38, 0.0, 0.0, 6.0, no_evasions, 3.0)
+    standing = np.zeros(6)
+    walker = Obstacle(-0.8, 2.5, 0.3, 0.0, -1.0)
+    rows = sf_rows([walker])
+    reverse = np.tile([-0.5, 0.0], (5, 1))
+    times, poses = f.manoeuvre(standing, reverse)
+    braking_times, braking = f.manoeuvre(standing, None)
+    reversed_s = times[-1] + f._reached_s(times[-1], poses[-1], rows, 3.0)
+    assert reversed_s < braking_times[-1] + f._reached_s(braking_times[-1], braking[-1], rows, 3.0)
+    verdict = f.filter(standing, reverse, [walker])
+    assert verdict.intervened and np.array_equal(verdict.command, np.zeros(2))
+    forward = np.tile([0.5, 0.0], (5, 1))
+    assert not f.filter(standing, forward, [walker]).intervened
