@@ -27,7 +27,7 @@ from controllers.husky_cbf.config import (
     PlannerConfig,
     YieldConfig,
 )
-from controllers.husky_cbf.movers import PLANNER_SWEEP_FACTOR, MoverModel
+from controllers.husky_cbf.movers import PLANNER_SWEEP_FACTOR, MoverModel, free_run_m
 from controllers.husky_cbf.planner import Planner, segment_blocked
 from controllers.references import CircleTrajectory
 from husky_sim.runs.scenario import load_scenario, shipped_scenarios
@@ -150,6 +150,24 @@ def test_the_planner_sweeps_a_mover_over_its_named_multiple_of_the_nmpc_sweep() 
     circles = movers.swept_circles([mover], np.array([0.0, -10.0]))
     assert circles[-1, 0] - circles[0, 0] == pytest.approx(movers.planner_sweep_s)
     assert movers.planner_sweep_s == pytest.approx(PLANNER_SWEEP_FACTOR * SWEEP_S)
+
+
+def test_a_mover_s_track_ends_where_its_disc_meets_a_static_one() -> None:
+    """free_run_m: a walker heading at a post 3 m ahead runs 3 - 0.3 - 0.2 m; one walking past it,
+    or away from it, or already touching it (passing beside it), and the post itself, run free."""
+    post = (3.0, 0.0, 0.0, 0.0, 0.2)
+    rows = np.array(
+        [
+            (0.0, 0.0, 1.0, 0.0, 0.3),  # at it
+            (0.0, 1.0, 1.0, 0.0, 0.3),  # past it, 1 m beside
+            (0.0, 0.0, -1.0, 0.0, 0.3),  # away from it
+            (2.7, 0.3, 1.0, 0.0, 0.3),  # touching it
+            post,
+        ]
+    )
+    free = free_run_m(rows)
+    assert free[0] == pytest.approx(2.5)
+    assert np.all(np.isinf(free[1:]))
 
 
 # -- approach -------------------------------------------------------------------------------------
