@@ -31,11 +31,11 @@ al.'s set of backups); the committed one if it is a way out (a way out taken goe
 one that keeps the most clearance. The same holds, over the shorter trap horizon (how soon a
 standing robot could leave a mover's track), where every cut that passes ends in a mover's way.
 A mover whose track meets a static obstacle within the threat horizon turns before it, and no
-prediction says where: its track counts only where a cut passes but one short of the whole plan
-(the robot is about to brake where that cut ends). A way out is a checked trajectory like any
-other. If none exists, the robot brakes as above all the same: no command is sent that no check
-passed, since a robot moving on an unchecked manoeuvre may be at fault for a contact, and a robot
-standing is not.
+prediction says where: its track counts only for a fallback and where a cut passes but one short
+of the whole plan (the robot is about to brake where that cut ends). A way out is a checked
+trajectory like any other. If none exists, the robot brakes as above all the same: no command is
+sent that no check passed, since a robot moving on an unchecked manoeuvre may be at fault for a
+contact, and a robot standing is not.
 
 Why this bounds the robot's fault. A robot that stands cannot be at fault for a contact (passive
 motion safety: Macek et al. 2009; Bouraine, Fraichard and Salhi 2012), and every committed
