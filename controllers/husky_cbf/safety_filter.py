@@ -51,6 +51,7 @@ an obstacle first seen inside the stopping distance (the sensing model's occlusi
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -235,12 +236,21 @@ class SafetyFilter:
                 runs[key] = self.manoeuvre(z0, commands)
             return runs[key]
 
-        # movers whose constant-velocity track says where they will be over the threat horizon:
-        # one that meets the static layer sooner turns before it, and no prediction says where
-        credible = data[free_run_m(data) > np.hypot(data[:, 2], data[:, 3]) * self._threat_s]
+        @functools.cache
+        def credible() -> np.ndarray:
+            """The movers whose constant-velocity track says where they will be over the threat
+            horizon: one that meets the static layer sooner turns before it, and no prediction
+            says where."""
+            return data[free_run_m(data) > np.hypot(data[:, 2], data[:, 3]) * self._threat_s]
+
+        @functools.cache
+        def trap_way_out() -> tuple[np.ndarray, float] | None:
+            """A way out over the trap horizon (_way_out), looked for at most once per step; the
+            rest of a way out already taken goes on, if it still is one: no dithering."""
+            return self._way_out(run_of, data, [self._committed, *self._evasions], self._trap_s)
+
         # of the cuts that pass, the one that movers reach last from now (s), the longest of those
         passing: tuple[float, int, float] | None = None  # (reached, k, clearance)
-        searched = False  # whether the way out was looked for (and none found) this step
         longest = True  # the cut at hand is the longest that passes
         for k in range(len(plan), 0, -1):  # the longest passing cut that stands out of the way
             times, poses = run_of(plan[:k])
@@ -249,13 +259,11 @@ class SafetyFilter:
                 continue
             # the plan is being cut: the robot is about to brake where its cut ends
             if longest and k < len(plan) and self._hit_standing(times[-1], poses[-1], data, self._trap_s):
-                # the rest of a way out already taken goes on, if it still is one: no dithering
-                way_out = self._way_out(run_of, data, [self._committed, *self._evasions], self._trap_s)
+                way_out = trap_way_out()
                 if way_out is not None:
                     return self._commit(*way_out)
-                searched = True
             longest = False
-            reached_s = times[-1] + self._reached_s(times[-1], poses[-1], credible, self._trap_s)
+            reached_s = times[-1] + self._reached_s(times[-1], poses[-1], credible(), self._trap_s)
             if math.isfinite(reached_s):
                 if passing is None or reached_s > passing[0]:
                     passing = (reached_s, k, clearance_m)
@@ -264,14 +272,13 @@ class SafetyFilter:
             return FilterVerdict(plan[0].copy(), False, clearance_m)
         if passing is not None:
             # every passing cut stands in a credible mover's way: a way out, if one exists
-            if not searched:
-                way_out = self._way_out(run_of, data, [self._committed, *self._evasions], self._trap_s)
-                if way_out is not None:
-                    return self._commit(*way_out)
+            way_out = trap_way_out()
+            if way_out is not None:
+                return self._commit(*way_out)
             # no way out: braking now, if movers reach the robot later where it would stand
             times, poses = run_of(np.zeros((0, 2)))
             clearance_m = self._clearance(times, poses, data, None)
-            reached_s = times[-1] + self._reached_s(times[-1], poses[-1], credible, self._trap_s)
+            reached_s = times[-1] + self._reached_s(times[-1], poses[-1], credible(), self._trap_s)
             if clearance_m >= 0.0 and reached_s > passing[0]:
                 return self._commit(np.zeros((0, 2)), clearance_m)
             _, k, clearance_m = passing
