@@ -25,8 +25,8 @@ OUTCOME_MEANINGS = {
     "bound in at most rejoin_s (instants while it was rejoining are judged by that rule, not the RMSE)",
     "stuck": "a deadlock: over the last stuck_window_steps control steps the Husky neither moved nor "
     "turned and the controller commanded neither (or its solver kept failing and braking), away from "
-    "the goal or reference, while that was reachable (not while waiting for it to come free, nor for "
-    "stuck_grace_s after)",
+    "the goal or reference, while that was reachable (not while waiting for it to come free or for a "
+    "mover within leave_s of the robot at its speed to pass, nor for stuck_grace_s after)",
     "collided": "the Husky's body touched an obstacle or a wall in the physics engine (clearance <= 0)",
     "timeout": "a point-stabilisation run that ended without reaching the goal, colliding or deadlocking",
     "interrupted": "Ctrl-C or SIGTERM ended the run early: not a result (the steps completed are kept)",

@@ -108,6 +108,28 @@ def reference_reachable(
     return np.all(distance > np.asarray(obstacle_radius_m, dtype=float) + robot_radius_m, axis=-1)
 
 
+def mover_within_reach(
+    robot_xy_m: np.ndarray,
+    obstacle_centres: Callable[[float], np.ndarray],
+    obstacle_radius_m: np.ndarray,
+    robot_radius_m: float,
+    t_s: float,
+    tau_s: float,
+    ahead_s: float,
+) -> bool:
+    """Whether a mover could reach the robot's circle at robot_xy_m (m) within ahead_s (s) at its
+    true speed at t_s (s), in whatever direction: gap <= speed * ahead_s, the gap between its
+    circle and the robot's (m), its speed from its true motion over the next tau_s (s). Static
+    obstacles never count. A robot that stands this close to a mover is giving way to it, not
+    deadlocked (OutcomeMonitor.update's `waiting`)."""
+    now, then = obstacle_centres(t_s), obstacle_centres(t_s + tau_s)
+    if len(now) == 0:
+        return False
+    speed = np.hypot(*(then - now).T) / tau_s
+    gap = np.hypot(*(now - np.asarray(robot_xy_m, dtype=float)[:2]).T) - obstacle_radius_m - robot_radius_m
+    return bool(np.any((speed > 0.0) & (gap <= speed * ahead_s)))
+
+
 class ReferenceBlockage:
     """The latest control instant (s) at which the reference point is unreachable
     (reference_reachable), looked ahead_s (s) into the obstacles' true motion, which is the
@@ -145,8 +167,8 @@ class OutcomeMonitor:
     """Names the outcome after each control step: `collided` when the clearance reaches
     -contact_tolerance_m (whatever happens after it), `reached` when a set-point is held within its
     tolerance for `goal_hold_s`, `stuck` when the robot idles away from the reference
-    (is_stuck_window) and was not waiting for its reference to come free in the last
-    stuck_grace_s (`update`'s `waiting`); `update` says whether the episode ends there
+    (is_stuck_window) and was not waiting for its reference to come free, or for a mover to pass,
+    in the last stuck_grace_s (`update`'s `waiting`); `update` says whether the episode ends there
     (Outcomes.stop_on_collision, stop_early; a held goal ends it even after a collision, which
     still names it).
 
@@ -189,10 +211,11 @@ class OutcomeMonitor:
         """Judge the step that ended at t_next (s) with the robot at `pose` (x m, y m, yaw rad) and
         the smallest clearance (m) over its physics steps; `rows` are the control steps so far
         (the stuck rule reads their velocities, commands and fallbacks). `waiting`: the reference
-        is unreachable now or within leave_s (ReferenceBlockage). A robot that waits for a
-        mover to pass its reference is not deadlocked, so the stuck rule is not judged until
-        stuck_grace_s after that; a reference that never comes free still fails, as a timeout or
-        as tracking not converged. True: stop here."""
+        is unreachable now or within leave_s (ReferenceBlockage), or a mover could reach the robot
+        within leave_s (mover_within_reach). A robot that waits for a mover to pass its reference
+        or its way is not deadlocked, so the stuck rule is not judged until stuck_grace_s after
+        that; a robot that never moves on still fails, as a timeout or as tracking not converged.
+        True: stop here."""
         outcomes = self.outcomes
         if waiting:
             self._waited_at = t_next

@@ -24,7 +24,7 @@ from controllers.model import wrap_angle
 from husky_sim import interrupts
 from husky_sim.interrupts import RunInterrupted
 from husky_sim.sim.contact import Contact
-from husky_sim.sim.outcomes import OutcomeMonitor, ReferenceBlockage, reference_reachable
+from husky_sim.sim.outcomes import OutcomeMonitor, ReferenceBlockage, mover_within_reach, reference_reachable
 from husky_sim.sim.sensing import Measurement
 from husky_sim.sim.step_log import StepLog, format_visible
 
@@ -158,7 +158,16 @@ def rollout(
                 plans.append(result.predicted_states)
             if observer is not None:
                 observer.on_step(row, result, centres)
-            if monitor.update(t + tau_s, new_pose, clearance, rows, blockage.waiting(k)):
+            waiting = blockage.waiting(k) or mover_within_reach(
+                new_pose[:2],
+                plant.obstacle_centres,
+                plant.obstacle_radii_m,
+                plant.footprint_radius_m,
+                t + tau_s,
+                tau_s,
+                monitor.outcomes.leave_s,
+            )
+            if monitor.update(t + tau_s, new_pose, clearance, rows, waiting):
                 break
     except (RunInterrupted, KeyboardInterrupt) as exc:  # the steps so far are kept and judged as such
         interrupted_by = interrupts.signum_of(exc)

@@ -5,7 +5,7 @@ import math
 import numpy as np
 
 from controllers import CircleTrajectory, SetPoint
-from husky_sim.sim.outcomes import OutcomeMonitor, Outcomes
+from husky_sim.sim.outcomes import OutcomeMonitor, Outcomes, mover_within_reach
 
 GOAL = SetPoint(1.0, 0.0, 0.0)
 
@@ -67,3 +67,15 @@ def test_a_contact_tolerance_and_the_stuck_rule_judged_at_the_end() -> None:
     monitor.finish([_row()] * 3)
     assert monitor.outcome == "stuck"
     assert monitor.update(0.2, far, -2e-6, []) and monitor.outcome == "collided"  # beyond it
+
+
+def test_a_mover_within_reach_is_one_whose_speed_closes_the_gap_in_time() -> None:
+    # a walker 2 m off at 0.5 m/s (gap 1.2 m to a 0.5 m robot circle) and a post touching the robot
+    def centres(t_s: float) -> np.ndarray:
+        return np.array([[2.0 - 0.5 * t_s, 0.0], [0.6, 0.0]])
+
+    radii, robot = np.array([0.3, 0.2]), np.zeros(2)
+    assert not mover_within_reach(robot, centres, radii, 0.5, 0.0, 0.1, ahead_s=2.0)  # 1.0 m < 1.2 m
+    assert mover_within_reach(robot, centres, radii, 0.5, 0.0, 0.1, ahead_s=2.5)  # 1.25 m >= 1.2 m
+    # the post alone never counts, however close: a robot stopped at a wall is not giving way
+    assert not mover_within_reach(robot, lambda t: centres(t)[1:], radii[1:], 0.5, 0.0, 0.1, ahead_s=2.5)
