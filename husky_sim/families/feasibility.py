@@ -12,7 +12,9 @@ of the reference may lie where the body cannot be.
 
 Movers are not obstacles of the plan (they pass); the start must be clear of every mover's
 first `MOVER_CLEAR_S` seconds for the controller's circle, so no layout begins in a collision the
-robot could not avoid.
+robot could not avoid. No mover may pass through a static obstacle while the run lasts (its disc
+may touch one, never overlap it by more than `OVERLAP_TOLERANCE_M`): a person walks round a
+pillar, a parked cart or a wall, and a mover that walks through one is no layout a robot meets.
 """
 
 from __future__ import annotations
@@ -25,6 +27,7 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import dijkstra
 
 from husky_sim.runs.scenario import Scenario
+from husky_sim.sim.world import ObstacleSpec
 
 #: Grid cell (m): a tenth of a Husky's width.
 RESOLUTION_M = 0.05
@@ -34,6 +37,10 @@ BORDER_M = 3.0
 MAX_BLOCKED_FRACTION = 0.2
 #: The start is clear of every mover for this long (s).
 MOVER_CLEAR_S = 1.0
+#: A mover's disc may overlap a static one by this much (m): the millimetre rounding of a file.
+OVERLAP_TOLERANCE_M = 0.005
+#: A mover's path is checked against the static obstacles at this spacing (m) along it.
+MOVER_CHECK_SPACING_M = 0.02
 
 
 @dataclass(frozen=True)
@@ -117,6 +124,9 @@ def check_layout(scenario: Scenario) -> Feasibility:
     static = [o for o in specs if not o.moving]
     centres = np.array([[o.x_m, o.y_m] for o in static]).reshape(-1, 2)
     radii = np.array([o.radius_m for o in static])
+    for i, o in enumerate(specs):
+        if o.moving and (through := _walks_through(o, centres, radii, scenario.duration_s)) is not None:
+            return Feasibility(False, f"mover {i} walks through a static obstacle at {through:.1f} s")
     goal = scenario.reference.goal
     if goal is not None:
         targets = np.array([[goal.x_m, goal.y_m]])
@@ -142,3 +152,19 @@ def check_layout(scenario: Scenario) -> Feasibility:
         what = "the goal" if goal is not None else "some of the reference"
         return Feasibility(False, f"no way for the body from the start to {what} among the static obstacles")
     return Feasibility(True, "a way exists", max(lengths))
+
+
+def _walks_through(
+    mover: ObstacleSpec, centres_m: np.ndarray, radii_m: np.ndarray, duration_s: float
+) -> float | None:
+    """The first time (s) within `duration_s` at which `mover`'s disc overlaps a static disc
+    (centres_m (S, 2), radii_m (S,)) by more than OVERLAP_TOLERANCE_M, sampled every
+    MOVER_CHECK_SPACING_M of its travel; None if it never does."""
+    if len(radii_m) == 0:
+        return None
+    speed = mover.speed_mps if mover.waypoints else math.hypot(mover.vx_mps, mover.vy_mps)
+    times = np.arange(0.0, duration_s, MOVER_CHECK_SPACING_M / speed)
+    centres = np.array([mover.motion_at(float(t))[:2] for t in times])  # (T, 2)
+    gaps = np.linalg.norm(centres[:, None, :] - centres_m[None, :, :], axis=2) - radii_m[None, :]
+    overlapping = np.flatnonzero(np.min(gaps, axis=1) < mover.radius_m - OVERLAP_TOLERANCE_M)
+    return float(times[overlapping[0]]) if len(overlapping) else None

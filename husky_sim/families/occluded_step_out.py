@@ -1,6 +1,6 @@
 """A person stepping out from behind an occluder: a pillar or a parked cart stands beside the
-way, and a walker hidden behind it (from the start) steps out across the way when the robot
-arrives. The robot's lidar has a limited range and field of view and sees nothing behind a
+way, and a walker hidden behind it (from the start) steps out round its far end and across the
+way when the robot arrives. The robot's lidar has a limited range and field of view and sees nothing behind a
 static obstacle, so the walker is unseen until it emerges."""
 
 from __future__ import annotations
@@ -31,13 +31,15 @@ def build(d: Draw) -> dict[str, Any]:
     if d["cart"] >= 1:  # a parked cart: a row of three cylinders along the way
         for dx in (-r, 0.0, r):
             d.static(px + dx, py, 0.6 * r)
+        half = 1.6 * r  # its half-length along the way
     else:
         d.static(px, py, r)
+        half = r
     centre = np.array([px, py])
     shadow = centre / np.linalg.norm(centre)  # from the start, through the occluder
     speed = d["walker_speed_mps"]
-    hide = centre + shadow * (r + WALKER_RADIUS_M + 0.2)
-    cross_x = px + d.uniform(0.0, 1.0)
+    hide = centre + shadow * (half + WALKER_RADIUS_M + 0.2)
+    cross_x = px + half + d.uniform(0.0, 1.0)  # out round the occluder's far end, not through it
     t_meet = max(cross_x / NOMINAL_SPEED_MPS + d["meet_offset_s"], 2.0)
     step = np.array([cross_x, 0.0]) - hide
     wait_m = max(speed * t_meet - float(np.linalg.norm(step)), 0.0)
@@ -66,8 +68,8 @@ FAMILY = register(
             Param("sensing_range_m", 5.0, 15.0, "m", "lidar range (field of view 270 deg, occlusion on)"),
         ),
         guarantees="the straight way is free of static obstacles; the walker starts in the "
-        "occluder's shadow as seen from the start, and the robot's lidar sees only what its "
-        "range, field of view and line of sight allow",
+        "occluder's shadow as seen from the start and walks round the occluder, and the robot's "
+        "lidar sees only what its range, field of view and line of sight allow",
         build=build,
     )
 )

@@ -97,6 +97,27 @@ def test_the_feasibility_check_refuses_a_goal_walled_in_and_a_mover_on_the_start
     assert not verdict.feasible and "mover 0" in verdict.reason
 
 
+def test_the_feasibility_check_refuses_a_walker_that_walks_through_a_post_not_one_that_passes_it() -> None:
+    post = {"x_m": 3.0, "y_m": 3.0, "radius_m": 0.4}
+    layout = {
+        "name": "past_a_post",
+        "duration_s": 20.0,
+        "robot": {"start": {"x_m": 0.0, "y_m": 0.0}, "radius_margin_m": 0.25},
+        "reference": {"goal": {"x_m": 6.0, "y_m": 0.0}},
+    }
+
+    def walker(y_m: float) -> dict[str, object]:  # walks along x at y_m, from x = 0 to 6 at 1 m/s
+        return {"x_m": 0.0, "y_m": y_m, "radius_m": 0.3, "speed_mps": 1.0, "waypoints": [[6.0, y_m]]}
+
+    # surfaces 0.01 m apart: it passes; 0.69 m between centres overlaps by 0.01 m: it walks through
+    assert check_layout(scenario_from_data({**layout, "obstacles": [post, walker(3.71)]})).feasible
+    verdict = check_layout(scenario_from_data({**layout, "obstacles": [post, walker(3.69)]}))
+    assert not verdict.feasible and verdict.reason == "mover 1 walks through a static obstacle at 2.9 s"
+    # the same walker, started after the run ends: never within the run
+    late = {**walker(3.69), "x_m": 25.0, "waypoints": [[30.0, 3.69]]}
+    assert check_layout(scenario_from_data({**layout, "obstacles": [post, late]})).feasible
+
+
 def test_a_campaign_with_a_parameter_out_of_range_is_refused_before_any_file(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
