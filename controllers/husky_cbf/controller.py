@@ -9,8 +9,9 @@ Per control step:
 2. build the Situation (behaviours/base.py): the reference's kind, the goal, the obstacles;
 3. the arbiter (arbiter.py) chooses the target: the reference itself, or a behaviour's or the
    planner's waypoint (recovery, yielding to movers, approach, detour);
-4. the NMPC's reference and obstacles: the target held over the horizon (or the reference
-   sampled along it), and the nearest obstacles predicted by the mover model (movers.py);
+4. the NMPC's reference and obstacles (_tracked): the reference sampled along the horizon, or
+   shifted by a step aside from its point, or the target held over the horizon; and the nearest
+   obstacles predicted by the mover model (movers.py);
 5. solve: the hard OCP (ocp.py); if it fails, the same OCP with an exactly penalised obstacle
    slack (a feasible hard plan is its optimum, so this also recovers solves that failed from a
    poor start); if that fails too, again from each of controllers.recovery's guesses; else brake;
@@ -28,7 +29,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from controllers.backends import FatropSolver, IpoptSolver, RawSolution
-from controllers.husky_cbf.arbiter import Arbiter, Decision
+from controllers.husky_cbf.arbiter import Arbiter, Decision, Mode
 from controllers.husky_cbf.behaviours.base import ReferenceKind, Situation
 from controllers.husky_cbf.behaviours.yield_to_movers import RobotLimits
 from controllers.husky_cbf.config import HuskyCBFConfig
@@ -214,14 +215,21 @@ class HuskyCBFController:
         return ref_states, ref_controls
 
     def _tracked(
-        self, decision: Decision, sampled: tuple[np.ndarray, np.ndarray]
+        self, decision: Decision, sampled: tuple[np.ndarray, np.ndarray], kind: ReferenceKind
     ) -> tuple[np.ndarray, np.ndarray]:
-        """The states and feed-forward (N+1, 3), (N, 2) the OCP tracks: the decision's target held
-        over the horizon at rest, or the reference itself."""
+        """The states and feed-forward (N+1, 3), (N, 2) the OCP tracks: the reference itself; a
+        step aside from a trajectory's point, as the reference shifted by that step (the target
+        moves on with the reference, and the robot keeps its pace beside it); else the decision's
+        target held over the horizon at rest."""
         n = self.config.nmpc.horizon
         if decision.target is None:
             return sampled
         target = decision.target
+        if decision.mode is Mode.YIELD and kind is ReferenceKind.TRAJECTORY:
+            states, controls = sampled
+            shifted = states.copy()
+            shifted[:, :2] += np.array([target.x_m, target.y_m]) - states[0, :2]
+            return shifted, controls
         return np.tile([target.x_m, target.y_m, target.heading_rad], (n + 1, 1)), np.zeros((n, 2))
 
     def _speed_caps(
@@ -326,7 +334,7 @@ class HuskyCBFController:
         decision = self.arbiter.decide(situation)
         guided = decision.guided
         # 4. what the NMPC tracks, its obstacles and limits
-        ref_states, ref_controls = self._tracked(decision, sampled)
+        ref_states, ref_controls = self._tracked(decision, sampled, situation.kind)
         centres, radii = self.movers.nmpc_obstacles(
             pose[:2], obstacles, cfg.slots, base.tau_s, base.horizon, base.obstacle_prediction, cfg.margin_m
         )

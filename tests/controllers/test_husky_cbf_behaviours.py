@@ -12,7 +12,7 @@ import pytest
 
 from controllers import Obstacle
 from controllers.husky_cbf import planner as planner_module
-from controllers.husky_cbf.arbiter import Arbiter, Mode
+from controllers.husky_cbf.arbiter import Arbiter, Decision, Mode
 from controllers.husky_cbf.behaviours.approach import (
     PIVOT_AIM_RAD,
     PointApproach,
@@ -672,3 +672,26 @@ def test_the_tracking_goal_lies_beyond_an_obstacle_on_the_reference_never_inside
     assert math.atan2(goal[1], goal[0]) > math.atan2(ahead[1], ahead[0])  # past it along the circle
     walker = controller._tracking_goal(reference, circles, np.array([False]), 0.0)
     assert walker == pytest.approx(reference.state_at(1.0))  # the preview point, inside it for now
+
+
+def test_a_step_aside_from_a_trajectory_moves_on_with_it_and_any_other_target_is_held_at_rest() -> None:
+    """What the NMPC tracks: the reference itself (TRACK); stepping aside from a moving reference's
+    point, the reference shifted by the step, at its pace (the target moves on with the
+    reference); any other target (here the planner's waypoint) held over the horizon at rest."""
+    path = next(p for p in shipped_scenarios() if p.stem == "paper_dynamic_tracking")
+    controller = load_scenario(path).make_controller("husky-cbf")
+    n = controller.config.nmpc.horizon
+    reference = CircleTrajectory(radius_m=3.0, angular_rate_radps=0.1)
+    sampled = reference.sample(0.0, controller.tau_s, n)
+    states, controls = sampled
+    trajectory = ReferenceKind.TRAJECTORY
+    assert (
+        controller._tracked(Decision(Mode.TRACK, None, False, False, False), sampled, trajectory) is sampled
+    )
+    step = Target(float(states[0, 0]) + 1.0, float(states[0, 1]) - 0.5, 0.3, None)
+    shifted, pace = controller._tracked(Decision(Mode.YIELD, step, True, False, False), sampled, trajectory)
+    assert shifted[:, :2] == pytest.approx(states[:, :2] + np.array([1.0, -0.5]))
+    assert shifted[:, 2] == pytest.approx(states[:, 2]) and pace == pytest.approx(controls)
+    waypoint = Target(1.0, 2.0, 0.5, None)
+    held, rest = controller._tracked(Decision(Mode.DETOUR, waypoint, True, False, False), sampled, trajectory)
+    assert held == pytest.approx(np.tile([1.0, 2.0, 0.5], (n + 1, 1))) and not rest.any()
