@@ -1,7 +1,7 @@
 """A person stepping out from behind an occluder: a pillar or a parked cart stands beside the
 way, and a walker hidden behind it (from the start) steps out round its far end and across the
-way when the robot arrives. The robot's lidar has a limited range and field of view and sees nothing behind a
-static obstacle, so the walker is unseen until it emerges."""
+way when the robot arrives. The robot's lidar has a limited range and field of view and sees
+nothing behind a static obstacle, so the walker is unseen until it emerges."""
 
 from __future__ import annotations
 
