@@ -31,7 +31,7 @@ def build(d: Draw) -> dict[str, Any]:
     if d["cart"] >= 1:  # a parked cart: a row of three cylinders along the way
         for dx in (-r, 0.0, r):
             d.static(px + dx, py, 0.6 * r)
-        half = 1.6 * r  # its half-length along the way
+        half = 1.6 * r  # its half-length along the way: end discs of 0.6 r centred r out
     else:
         d.static(px, py, r)
         half = r
