@@ -14,7 +14,11 @@ Per control step:
    obstacles predicted by the mover model (movers.py);
 5. solve: the hard OCP (ocp.py); if it fails, the same OCP with an exactly penalised obstacle
    slack (a feasible hard plan is its optimum, so this also recovers solves that failed from a
-   poor start); if that fails too, again from each of controllers.recovery's guesses; else brake;
+   poor start); if that fails too, again from each of controllers.recovery's guesses; else brake.
+   After a step whose plan needed the slack, the penalised OCP goes first: the hard one most
+   likely has no solution again, and proving that costs as much as a solve. Its plan is taken if
+   it needs the slack again (the hard OCP then has no solution: a feasible one would be the
+   penalised optimum); else the hard OCP is solved as usual, its plan preferred;
 6. the safety filter (safety_filter.py), when configured, on the command;
 7. the result: whether the step was guided, penalised (obstacle slack > 0) or recovered, and the
    recovery phase.
@@ -126,6 +130,7 @@ class HuskyCBFController:
 
     def reset(self) -> None:
         self._plan: ExtendedPlan | None = None
+        self._needed_slack = False  # whether the last plan needed the penalised obstacle slack
         self._pipe.reset()
         self._omega_body = 0.0  # body yaw rate predicted for now (rad/s)
         self._predicted_turn = 0.0  # heading change predicted over the last control step (rad)
@@ -301,6 +306,11 @@ class HuskyCBFController:
             self._solver_fallbacks.append(raw.fallback_reason)
         return raw
 
+    def _slack(self, raw: RawSolution) -> float:
+        """The largest obstacle slack (m^2) of a solution of the penalised OCP."""
+        plan = ExtendedPlan.from_vector(raw.decision, self._soft_problem.layout)
+        return float(np.max(plan.sigma, initial=0.0))
+
     def solve(
         self, state: np.ndarray, reference: Reference, obstacles: Sequence[Obstacle], t: float
     ) -> ControlResult:
@@ -351,10 +361,17 @@ class HuskyCBFController:
         hard, soft = self._hard_problem.layout, self._soft_problem.layout
 
         # 5. solve: hard, then soft from the warm guess and from each recovery guess, else brake
-        raw, layout, recovered_by = self._solve(self._hard, hard, p, guess), hard, ""
+        # (soft first while the last plan needed its slack: a plan that needs it again is taken)
+        penalised = self._solve(self._soft, soft, p, guess) if self._needed_slack else None
+        if penalised is not None and penalised.success and self._slack(penalised) > SLACK_TOL:
+            raw, layout, recovered_by = penalised, soft, "penalty"
+        else:
+            raw, layout, recovered_by = self._solve(self._hard, hard, p, guess), hard, ""
+        if not raw.success and penalised is not None and penalised.success:
+            raw, layout, recovered_by = penalised, soft, "penalty"
         if not raw.success:
             first_status = raw.status
-            attempts = [("penalty", guess)]
+            attempts = [] if penalised is not None else [("penalty", guess)]
             previous = self._plan.commands[1:] if self._plan is not None else None
             if previous is not None:
                 previous = np.vstack([previous, previous[-1:]])
@@ -381,6 +398,7 @@ class HuskyCBFController:
                 return self._brake(pose, n_real, len(obstacles) - n_real, start, first_status, guided)
         plan = ExtendedPlan.from_vector(raw.decision, layout)
         self._plan = plan
+        self._needed_slack = layout is soft and self._slack(raw) > SLACK_TOL
         command = plan.states[1, 3:5].copy()
         # 6. the safety filter
         filtered = False
