@@ -398,7 +398,7 @@ class HuskyCBFController:
                 return self._brake(pose, n_real, len(obstacles) - n_real, start, first_status, guided)
         plan = ExtendedPlan.from_vector(raw.decision, layout)
         self._plan = plan
-        self._needed_slack = layout is soft and self._slack(raw) > SLACK_TOL
+        self._needed_slack = bool(np.max(plan.sigma, initial=0.0) > SLACK_TOL)  # zeros in a hard plan
         command = plan.states[1, 3:5].copy()
         # 6. the safety filter
         filtered = False
@@ -425,7 +425,7 @@ class HuskyCBFController:
             obstacles_considered=n_real,
             obstacles_ignored=len(obstacles) - n_real,
             recovered_by=recovered_by,
-            soft_constraint=bool(np.max(plan.sigma, initial=0.0) > SLACK_TOL),
+            soft_constraint=self._needed_slack,
             guided=guided,
             solver=raw.solver,
             solver_fallback="; ".join(dict.fromkeys(self._solver_fallbacks)),
