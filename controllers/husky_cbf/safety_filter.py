@@ -10,7 +10,10 @@ the body's yaw rate lagging as the model says) until the robot stands. Along it 
 must clear each obstacle: a static one as measured; a mover at constant velocity from its
 measurement, its radius grown by half a stated bound on its change of velocity times the squared
 time since it was measured (`mover_accel_bound_mps2`: a walker that speeds up, slows down or turns
-within that bound stays inside its circle).
+within that bound stays inside its circle). The discs are wider than the body, so a robot may
+stand closer to a static obstacle than they allow (pushed, or braked late); that obstacle is
+checked shrunk by the discs' overlap where the candidate starts: no disc may go deeper into it,
+and the robot may leave it (else no candidate would ever pass again).
 
 The choice, each step. Candidates are the NMPC's plan cut after k of its commands, then braking,
 for k = N down to 1; the first that passes the check and ends out of every mover's way (below)
@@ -226,7 +229,7 @@ class SafetyFilter:
         plan = np.asarray(plan, dtype=float).reshape(-1, 2)
         if not (np.all(np.isfinite(plan)) and np.all(np.isfinite(z0))):
             plan = np.zeros((0, 2))
-        data = _obstacle_rows(obstacles, ages_s)
+        data = self._overlap_allowed(z0, _obstacle_rows(obstacles, ages_s))
         runs: dict[bytes, tuple[np.ndarray, np.ndarray]] = {}  # each manoeuvre, integrated once
 
         def run_of(commands: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -302,6 +305,23 @@ class SafetyFilter:
         command = chosen[0].copy() if len(chosen) else np.zeros(2)
         self._committed = chosen[1:].copy()
         return FilterVerdict(command, True, clearance_m)
+
+    def _overlap_allowed(self, z0: np.ndarray, data: np.ndarray) -> np.ndarray:
+        """`data` with each static obstacle that the body discs at z0 already overlap shrunk by
+        that overlap: the discs are wider than the body, so a robot may stand closer than they
+        allow (pushed, or braked late), and from there no candidate would pass; checked against
+        the shrunk obstacle, a candidate may not bring a disc deeper into it, and may leave it."""
+        static = (data[:, 2] == 0.0) & (data[:, 3] == 0.0)
+        if not np.any(static) or not np.all(np.isfinite(z0[:3])):
+            return data
+        heading = np.array([math.cos(z0[2]), math.sin(z0[2])])
+        discs = z0[None, :2] + self._offsets[:, None] * heading[None, :]  # (D, 2)
+        rows = data[static]
+        gaps = np.hypot(*(discs[:, None, :] - rows[None, :, 0:2]).transpose(2, 0, 1))
+        overlap = np.minimum(np.min(gaps, axis=0) - self._disc_radius - rows[:, 4], 0.0)
+        out = data.copy()
+        out[static, 4] = np.maximum(rows[:, 4] + overlap, 0.0)
+        return out
 
     def _commit(self, commands: np.ndarray, clearance_m: float) -> FilterVerdict:
         """Commit a way out (command sequence `commands`, empty: braking now) and send its first

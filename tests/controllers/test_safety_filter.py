@@ -6,6 +6,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import pytest
 
 from controllers.husky_cbf.config import RobotResponse
 from controllers.husky_cbf.safety_filter import SafetyFilter
@@ -232,3 +233,16 @@ def test_with_no_way_out_of_a_walker_s_way_the_robot_stands_where_it_is_reached_
     assert verdict.intervened and np.array_equal(verdict.command, np.zeros(2))
     forward = np.tile([0.5, 0.0], (5, 1))
     assert not f.filter(standing, forward, [walker]).intervened
+
+
+def test_a_robot_standing_closer_to_a_post_than_its_discs_allow_may_leave_but_not_go_deeper() -> None:
+    """The front disc (0.33 m ahead, radius 0.38 m) overlaps a post 0.1 m: no candidate from there
+    clears it as measured, so the robot could never move again. It may back away from the post,
+    and may not drive on into it."""
+    standing = _moving_at(0.0)
+    post = [Obstacle(0.33 + 0.38 + 0.3 - 0.1, 0.0, 0.3)]
+    backing = _filter().filter(standing, np.array([[-0.5, 0.0]] * 5), post)
+    assert not backing.intervened and backing.command[0] == -0.5
+    assert backing.clearance_m == pytest.approx(0.0, abs=1e-9)  # shrunk by the overlap: no deeper
+    onwards = _filter().filter(standing, np.array([[0.5, 0.0]] * 5), post)
+    assert onwards.intervened and np.array_equal(onwards.command, np.zeros(2))
