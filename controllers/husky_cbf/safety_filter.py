@@ -229,7 +229,8 @@ class SafetyFilter:
         plan = np.asarray(plan, dtype=float).reshape(-1, 2)
         if not (np.all(np.isfinite(plan)) and np.all(np.isfinite(z0))):
             plan = np.zeros((0, 2))
-        data = self._overlap_allowed(z0, _obstacle_rows(obstacles, ages_s))
+        measured = _obstacle_rows(obstacles, ages_s)
+        data = self._overlap_allowed(z0, measured)  # what the check reads
         runs: dict[bytes, tuple[np.ndarray, np.ndarray]] = {}  # each manoeuvre, integrated once
 
         def run_of(commands: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -244,7 +245,7 @@ class SafetyFilter:
             """The movers whose constant-velocity track says where they will be over the threat
             horizon: one that meets the static layer sooner turns before it, and no prediction
             says where."""
-            return data[free_run_m(data) > np.hypot(data[:, 2], data[:, 3]) * self._threat_s]
+            return data[free_run_m(measured) > np.hypot(data[:, 2], data[:, 3]) * self._threat_s]
 
         @functools.cache
         def trap_way_out() -> tuple[np.ndarray, float] | None:
@@ -310,7 +311,9 @@ class SafetyFilter:
         """`data` with each static obstacle that the body discs at z0 already overlap shrunk by
         that overlap: the discs are wider than the body, so a robot may stand closer than they
         allow (pushed, or braked late), and from there no candidate would pass; checked against
-        the shrunk obstacle, a candidate may not bring a disc deeper into it, and may leave it."""
+        the shrunk obstacle, a candidate may not bring a disc deeper into it, and may leave it.
+        The shrunk radius is only the check's threshold, so it may fall below zero (a disc deeper
+        than the obstacle's radius); where movers meet the static layer is read as measured."""
         static = (data[:, 2] == 0.0) & (data[:, 3] == 0.0)
         if not np.any(static) or not np.all(np.isfinite(z0[:3])):
             return data
@@ -320,7 +323,7 @@ class SafetyFilter:
         gaps = np.hypot(*(discs[:, None, :] - rows[None, :, 0:2]).transpose(2, 0, 1))
         overlap = np.minimum(np.min(gaps, axis=0) - self._disc_radius - rows[:, 4], 0.0)
         out = data.copy()
-        out[static, 4] = np.maximum(rows[:, 4] + overlap, 0.0)
+        out[static, 4] = rows[:, 4] + overlap
         return out
 
     def _commit(self, commands: np.ndarray, clearance_m: float) -> FilterVerdict:

@@ -246,3 +246,12 @@ def test_a_robot_standing_closer_to_a_post_than_its_discs_allow_may_leave_but_no
     assert backing.clearance_m == pytest.approx(0.0, abs=1e-9)  # shrunk by the overlap: no deeper
     onwards = _filter().filter(standing, np.array([[0.5, 0.0]] * 5), post)
     assert onwards.intervened and np.array_equal(onwards.command, np.zeros(2))
+
+
+def test_a_disc_deeper_in_a_thin_post_than_its_radius_may_still_leave() -> None:
+    """A post of 0.05 m radius with the front disc's centre 0.35 m from it: the disc is deeper in
+    it than the post is wide. Backing away is still allowed, driving on is not."""
+    standing = _moving_at(0.0)
+    post = [Obstacle(0.33 + 0.35, 0.0, 0.05)]
+    assert not _filter().filter(standing, np.array([[-0.5, 0.0]] * 5), post).intervened
+    assert _filter().filter(standing, np.array([[0.5, 0.0]] * 5), post).intervened
