@@ -307,6 +307,11 @@ class SafetyFilter:
         self._committed = chosen[1:].copy()
         return FilterVerdict(command, True, clearance_m)
 
+    def _discs_at(self, pose: np.ndarray) -> np.ndarray:
+        """(D, 2) the body discs' centres (m) at `pose` [x, y, theta, ...]."""
+        heading = np.array([math.cos(pose[2]), math.sin(pose[2])])
+        return pose[None, :2] + self._offsets[:, None] * heading[None, :]
+
     def _overlap_allowed(self, z0: np.ndarray, data: np.ndarray) -> np.ndarray:
         """`data` with each static obstacle that the body discs at z0 already overlap shrunk by
         that overlap: the discs are wider than the body, so a robot may stand closer than they
@@ -317,8 +322,7 @@ class SafetyFilter:
         static = (data[:, 2] == 0.0) & (data[:, 3] == 0.0)
         if not np.any(static) or not np.all(np.isfinite(z0[:3])):
             return data
-        heading = np.array([math.cos(z0[2]), math.sin(z0[2])])
-        discs = z0[None, :2] + self._offsets[:, None] * heading[None, :]  # (D, 2)
+        discs = self._discs_at(z0)
         rows = data[static]
         gaps = np.hypot(*(discs[:, None, :] - rows[None, :, 0:2]).transpose(2, 0, 1))
         overlap = np.minimum(np.min(gaps, axis=0) - self._disc_radius - rows[:, 4], 0.0)
@@ -368,8 +372,7 @@ class SafetyFilter:
         data = data[(data[:, 2] != 0.0) | (data[:, 3] != 0.0)]
         if len(data) == 0 or horizon_s <= 0.0:
             return math.inf
-        heading = np.array([math.cos(pose[2]), math.sin(pose[2])])
-        discs = pose[None, :2] + self._offsets[:, None] * heading[None, :]  # (D, 2)
+        discs = self._discs_at(pose)
         # each mover's centre relative to each disc at the stand, and when their gap closes
         rel = data[:, None, 0:2] + data[:, None, 2:4] * (self._lead_s + stand_s) - discs[None, :, :]
         reach = data[:, 4, None] + self._disc_radius  # (M, 1)
