@@ -54,6 +54,9 @@ class ControlResult:
     #: a safety filter sent another command than the plan's first (husky-cbf's safety_filter.py):
     #: the committed trajectory, a braking or evasive backup, or an evasion went instead
     filtered: bool = False
+    #: the behaviour whose target the plan tracked ("" where a controller has none): husky-cbf's
+    #: arbiter mode (track, detour, yield, approach, recover; arbiter.py)
+    mode: str = ""
 
     @property
     def is_fallback(self) -> bool:
@@ -68,6 +71,7 @@ class ControlResult:
         solve_time_s: float,
         status: str,
         guided: bool = False,
+        mode: str = "",
     ) -> ControlResult:
         """A braking command (v = 0, omega = 0) with no plan: what a controller applies when no
         solve gave one."""
@@ -88,6 +92,7 @@ class ControlResult:
             obstacles_considered=considered,
             obstacles_ignored=ignored,
             guided=guided,
+            mode=mode,
         )
 
 

@@ -322,9 +322,7 @@ class HuskyCBFController:
         if pose.shape != (3,) or not np.all(np.isfinite(pose)):
             self._plan = None
             self._pose_filter.reset()
-            return self._brake(
-                np.full(3, np.nan), n_real, len(obstacles) - n_real, start, "invalid state", False
-            )
+            return self._brake(np.full(3, np.nan), n_real, len(obstacles) - n_real, start, "invalid state")
         # 1. the state where the drive acts on this step's command, the filtered pose, and the
         # obstacles measured now with those remembered out of the sensor's view
         obstacles, ages = self._memory.update(pose, obstacles, t)
@@ -395,7 +393,7 @@ class HuskyCBFController:
             if not raw.success:
                 self._plan = None
                 self._hard.reset()
-                return self._brake(pose, n_real, len(obstacles) - n_real, start, first_status, guided)
+                return self._brake(pose, n_real, len(obstacles) - n_real, start, first_status, decision)
         plan = ExtendedPlan.from_vector(raw.decision, layout)
         self._plan = plan
         self._needed_slack = bool(np.max(plan.sigma, initial=0.0) > SLACK_TOL)  # zeros in a hard plan
@@ -432,6 +430,7 @@ class HuskyCBFController:
             plan_start_s=self._plan_start_s,
             escape=self.arbiter.recovery.phase,
             filtered=filtered,
+            mode=decision.mode.value,
         )
 
     def _barriers(self, plan: ExtendedPlan, p: np.ndarray, layout: Layout, n_real: int) -> np.ndarray:
@@ -450,7 +449,13 @@ class HuskyCBFController:
         self._yaw_prev = float(pose[2])
 
     def _brake(
-        self, pose: np.ndarray, n_real: int, ignored: int, start: float, status: str, guided: bool
+        self,
+        pose: np.ndarray,
+        n_real: int,
+        ignored: int,
+        start: float,
+        status: str,
+        decision: Decision | None = None,
     ) -> ControlResult:
         n = self.config.nmpc.horizon
         if self._filter is not None:
@@ -461,7 +466,8 @@ class HuskyCBFController:
         else:
             self._pipe.send(np.zeros(2))
             self._yaw_prev = None
-        result = ControlResult.brake(n, n_real, ignored, time.perf_counter() - start, status, guided)
+        guided, mode = (False, "") if decision is None else (decision.guided, decision.mode.value)
+        result = ControlResult.brake(n, n_real, ignored, time.perf_counter() - start, status, guided, mode)
         result.solver_fallback = "; ".join(dict.fromkeys(self._solver_fallbacks))
         result.escape = self.arbiter.recovery.phase
         return result

@@ -207,6 +207,9 @@ class EpisodeMetrics:
     collision_relative_speed_mps: float | None = None  # |robot velocity - touched body's velocity|
     #: steps whose command a safety filter replaced with its committed or braking backup (husky-cbf's)
     filter_interventions: int = 0
+    #: steps whose behaviour (the log's `mode`) differs from the step before's: a count far above
+    #: the behaviours a run needs is a controller switching back and forth between them
+    mode_changes: int = 0
 
     def as_dict(self) -> dict[str, object]:
         return asdict(self)
@@ -317,4 +320,5 @@ def summarise(
         collision_obstacle=None if contact is None else contact.obstacle,
         collision_relative_speed_mps=None if contact is None else contact.relative_speed_mps,
         filter_interventions=int(np.sum(col["filtered"])),
+        mode_changes=int(np.sum(col["mode"][1:] != col["mode"][:-1])),
     )

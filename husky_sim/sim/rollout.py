@@ -240,6 +240,7 @@ def _solve_columns(result: ControlResult, deadline_miss: bool) -> dict[str, obje
         "recovered_by": result.recovered_by,
         "soft_constraint": int(result.soft_constraint),
         "guided": int(result.guided),
+        "mode": result.mode,
         "escape": result.escape,
         "filtered": int(result.filtered),
         "deadline_miss": int(deadline_miss),

@@ -52,6 +52,7 @@ LOG_COLUMNS = (
     "recovered_by",
     "soft_constraint",
     "guided",
+    "mode",
     "escape",
     "filtered",
     "deadline_miss",
