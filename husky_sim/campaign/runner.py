@@ -43,6 +43,7 @@ CSV_COLUMNS = (
     "time_to_goal_s",
     "solve_ms_p99",
     "filter_interventions",
+    "mode_changes",
     "params",
 )
 #: Outcomes that a restart runs again (the run did not finish).
@@ -191,6 +192,7 @@ def row_of(task: RunTask, summary: Mapping[str, object]) -> dict[str, object]:
         "time_to_goal_s": _rounded(summary.get("time_to_goal_s")),
         "solve_ms_p99": _rounded(summary.get("solve_ms_p99")),
         "filter_interventions": summary.get("filter_interventions"),
+        "mode_changes": summary.get("mode_changes"),
         "params": task.params,
     }
     return row

@@ -46,6 +46,10 @@ def test_a_campaign_writes_a_row_per_run_and_a_report(straight: Path) -> None:
     rows = _rows(straight)
     assert [r["layout"] for r in rows] == ["crossing_walkers-s7-000", "crossing_walkers-s7-001"]
     assert all(r["class"] for r in rows) and all(r["controller"] == "husky-cbf" for r in rows)
+    for row in rows:  # the controller's own counts, as its run's summary has them
+        summary = json.loads((straight / "runs" / row["layout"] / "summary.json").read_text())
+        assert int(row["mode_changes"]) == summary["mode_changes"] > 0
+        assert int(row["filter_interventions"]) == summary["filter_interventions"]
     report = (straight / "campaign.md").read_text()
     assert "| crossing_walkers | 2 |" in report and "husky-sim campaign --families crossing_walkers" in report
     assert (straight / "figures" / "crossing_walkers.png").is_file()
