@@ -15,7 +15,8 @@ from pathlib import Path
 #: obstacle's circle at t_s inflated by the footprint radius; outcomes.reference_reachable), and
 #: the solve's slacks, activity, status and wall time; `repeated` is 1 where the step ran no solver,
 #: every problem it posed having been answered before, bit for bit (controllers.backends.repeats).
-#: `visible_obstacles` lists the obstacles the controller was told of at t_s (format_visible).
+#: `visible_obstacles` lists the obstacles the controller was told of at t_s (format_visible);
+#: `mode` names the behaviour whose target the plan tracked ("" for a controller without any).
 LOG_COLUMNS = (
     "step",
     "t_s",
