@@ -319,7 +319,7 @@ class SafetyFilter:
         the shrunk obstacle, a candidate may not bring a disc deeper into it, and may leave it.
         The shrunk radius is only the check's threshold, so it may fall below zero (a disc deeper
         than the obstacle's radius); where movers meet the static layer is read as measured."""
-        static = (data[:, 2] == 0.0) & (data[:, 3] == 0.0)
+        static = _still(data)
         if not np.any(static) or not np.all(np.isfinite(z0[:3])):
             return data
         discs = self._discs_at(z0)
@@ -369,7 +369,7 @@ class SafetyFilter:
         """How soon (s) after `stand_s` (s from z0) a mover (a row of `data` with a velocity,
         _obstacle_rows) at constant velocity, not grown, first reaches a body disc of a robot
         standing at `pose`, within `horizon_s`; inf if none does."""
-        data = data[(data[:, 2] != 0.0) | (data[:, 3] != 0.0)]
+        data = data[~_still(data)]
         if len(data) == 0 or horizon_s <= 0.0:
             return math.inf
         discs = self._discs_at(pose)
@@ -392,3 +392,9 @@ def _obstacle_rows(obstacles: Sequence[Obstacle], ages_s: Sequence[float] | None
     ages = np.zeros(len(obstacles)) if ages_s is None else np.asarray(ages_s, dtype=float)
     rows = [(o.x_m, o.y_m, o.vx_mps, o.vy_mps, o.radius_m, a) for o, a in zip(obstacles, ages, strict=True)]
     return np.array(rows, dtype=float).reshape(-1, 6)
+
+
+def _still(data: np.ndarray) -> np.ndarray:
+    """(M,) which rows of `data` (_obstacle_rows) stand exactly still: the static layer, checked as
+    measured; any other row is a mover, predicted and grown."""
+    return (data[:, 2] == 0.0) & (data[:, 3] == 0.0)
